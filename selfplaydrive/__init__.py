@@ -1,0 +1,6 @@
+"""selfplaydrive: composable, fast self-play driving environments (Sisask, Tampuu, Matiisen).
+
+The simulator core imports no torch; trainers and models do.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,1 @@
+"""Private Cython kernels: nogil, struct-of-arrays, parallel over worlds. Not a public API."""
