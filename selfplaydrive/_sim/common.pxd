@@ -1,0 +1,232 @@
+# cython: language_level=3
+"""Structs and constants shared by the simulator kernels (paper section 2).
+
+Every pointer below addresses a C-contiguous NumPy array owned by `selfplaydrive.sim.vec_env`
+(or `sim.atlas` for the read-only map data); `world.pyx` fills these structs once and the
+kernels read and write through them without the GIL. Agent arrays are indexed by the flat
+agent index i = w * A + a (world w, slot a); static, pedestrian and light arrays likewise by
+w * S + k, w * P + k and w * G + g.
+"""
+
+from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t
+
+# Segment types: must match selfplaydrive.maps.roadmap.SegmentType.
+cdef enum:
+    SEG_LANE = 0
+    SEG_EDGE = 1
+    SEG_STOP = 2
+    SEG_LIGHT = 3
+    SEG_CROSSWALK = 4
+
+# Traffic-light states (section 2.2).
+cdef enum:
+    LIGHT_OFF = 0
+    LIGHT_RED = 1
+    LIGHT_YELLOW = 2
+    LIGHT_GREEN = 3
+
+# Per-step event bits of an agent (`Sim.events`); the same bits mark `Sim.ever`.
+cdef enum:
+    EV_COLLIDE = 1      # box overlaps another vehicle (agent, static or obstacle)
+    EV_PED = 2          # box overlaps a pedestrian
+    EV_OFFROAD = 4      # box touches a ROAD_EDGE segment
+    EV_RED = 8          # box touches (or the centre crossed) a red traffic-light line
+    EV_WAYPOINT = 16    # current waypoint reached this step
+    EV_COMFORT = 32     # |a_long| or |a_lat| above the comfort limit
+
+# Order of the reward terms in the (N, 8) per-term buffer (section 2.3); rewards/registry.py
+# holds the same names.
+cdef enum:
+    T_WAYPOINT = 0
+    T_COLLISION = 1
+    T_OFFROAD = 2
+    T_RED = 3
+    T_COMFORT = 4
+    T_CENTER = 5
+    T_ALIGN = 6
+    T_VELOCITY = 7
+    NUM_TERMS = 8
+
+# Order of the coefficients in `Sim.coeffs` (scenario.types.COEFF_NAMES).
+cdef enum:
+    C_RADIUS = 0
+    C_COLLISION = 1
+    C_OFFROAD = 2
+    C_RED = 3
+    C_COMFORT = 4
+    C_CENTER = 5
+    C_BIAS = 6
+    C_ALIGN = 7
+    NUM_COEFFS = 8
+
+# Order of the hidden parameters in `Sim.hidden` (scenario.types.HIDDEN_PARAMS).
+cdef enum:
+    H_FRICTION = 0
+    H_ACCEL_GAIN = 1
+    H_STEER_GAIN = 2
+
+# Event counters per world (`Sim.ev_count`), summed over agent-steps.
+cdef enum:
+    S_COLLIDE = 0
+    S_PED = 1
+    S_OFFROAD = 2
+    S_RED = 3
+    S_WAYPOINT = 4
+    S_COMFORT = 5
+    S_TERMINATED = 6
+    S_TRUNCATED = 7
+    NUM_STATS = 8
+
+# Physics kernels (selected once at construction, section 2.6).
+cdef enum:
+    PHYS_BICYCLE = 0
+    PHYS_FRICTION = 1
+
+# Observation block sizes (obs/layout): features per object and per road segment.
+cdef enum:
+    EGO_DIM = 19
+    OBJ_DIM = 9
+    ROAD_DIM = 8
+
+
+ctypedef struct Atlas:
+    # Read-only road data of every map of the env, concatenated (sim/atlas.py).
+    int num_maps             # number of maps
+    const float* seg_start   # (Ns, 2) [m] segment first endpoint, local frame of its map
+    const float* seg_end     # (Ns, 2) [m] second endpoint
+    const float* seg_mid     # (Ns, 2) [m] midpoint
+    const float* seg_dir     # (Ns, 2) unit direction start -> end (precomputed: no trig per step)
+    const float* seg_len     # (Ns,) [m] length
+    const int8_t* seg_type   # (Ns,) SEG_* type
+    const int32_t* seg_group # (Ns,) signal group of a traffic-light segment, -1 otherwise
+    const float* grid_origin # (M, 2) [m] lower-left corner of each map's grid
+    const float* grid_cell   # (M,) [m] cell edge of each map's grid
+    const int32_t* grid_nx   # (M,) cells along x
+    const int32_t* grid_ny   # (M,) cells along y
+    const int64_t* cell_base # (M,) offset of map m's first cell in cell_offsets
+    const int32_t* cell_offsets  # (sum nx*ny + M,) CSR offsets into cell_items (global)
+    const int32_t* cell_items    # (Ns,) global segment indices bucketed by cell
+    const float* max_seg_len # (M,) [m] longest segment of each map
+
+
+ctypedef struct Params:
+    # Constants of one env (sim/params.py `SimParams`); never changed while stepping.
+    float dt                 # [s] step length (0.1, section 2)
+    int physics              # PHYS_* kernel
+    float wheelbase_ratio    # wheelbase / box length of the bicycle model
+    float gravity            # [m/s^2] g of the friction limit (9.81)
+    float max_speed          # [m/s] speed clamp (also the observation scale of speeds)
+    int discrete             # 1: actions are table indices, 0: continuous values
+    const float* accel_table # (n_accel,) [m/s^2] discrete acceleration values
+    const float* steer_table # (n_steer,) [rad] discrete steering angles
+    float comfort_limit      # [m/s^2] comfort threshold on |a_long| and |a_lat| (3)
+    float obs_radius         # [m] objects and road segments are observed within this (100)
+    float lane_radius        # [m] lane association searches centerlines within this
+    float terminate_threshold  # C_collision / C_offroad at or above which an event ends the agent (0.5)
+    int obstacle_mode        # 1: a terminated vehicle stays as a static obstacle, 0: removed
+    float velocity_reward    # reward per step at max(cos alpha, 0) = 1 (2.5e-4)
+    float velocity_min       # [m/s] minimum speed for the velocity reward (2.5)
+    float waypoint_reward    # reward per reached waypoint (0.25)
+    float center_max_angle   # [rad] centre reward only when |alpha| is below this (60 deg)
+    float light_min          # [s] shortest traffic-light state duration (0.5)
+    float light_max          # [s] longest duration (10)
+    int ped_vanish           # 1: a pedestrian at the end of its path disappears, 0: stands
+    float pos_scale          # [m] observation scale of object and road positions (= obs_radius)
+    float wp_scale           # [m] observation scale of waypoint offsets
+    float length_scale       # [m] observation scale of box and segment lengths
+    float width_scale        # [m] observation scale of box widths
+    float lateral_scale      # [m] observation scale of the lane offset s
+    const float* coeff_scale # (NUM_COEFFS,) observation scale of each reward coefficient
+    int max_substeps         # cap on collision sub-steps per pair (anti-tunnelling)
+
+
+ctypedef struct Sim:
+    # Mutable state of all worlds (sim/vec_env.py owns the arrays).
+    int W                    # worlds
+    int A                    # agent slots per world
+    int S                    # static vehicle slots per world
+    int P                    # pedestrian slots per world
+    int K                    # waypoint slots per agent
+    int T                    # points per pedestrian path
+    int G                    # signal groups per world (max over maps, >= 1)
+    int max_obj              # observed objects per agent (63)
+    int max_road             # observed road segments per agent (200)
+    int cand_cap             # scratch capacity per world for road candidates
+    int obs_dim              # floats per observation row
+    # agents (W * A)
+    float* x                 # [m] box centre x
+    float* y                 # [m] box centre y
+    float* heading           # [rad] in (-pi, pi]
+    float* hcos              # cos(heading), cached by physics
+    float* hsin              # sin(heading)
+    float* speed             # [m/s] >= 0, along the direction of travel
+    float* px                # [m] centre x before the last physics step
+    float* py                # [m] centre y before the last physics step
+    float* pheading          # [rad] heading before the last physics step
+    float* length            # [m] box length
+    float* width             # [m] box width
+    float* a_long            # [m/s^2] longitudinal acceleration applied in the last step
+    float* a_lat             # [m/s^2] lateral acceleration applied in the last step
+    float* coeffs            # (N, NUM_COEFFS) reward coefficients (observed)
+    float* hidden            # (N, 3) friction mu, accel gain, steer gain (never observed)
+    float* waypoints         # (N, K, 2) [m] route waypoints
+    int32_t* num_wp          # (N,) valid waypoints
+    int32_t* wp_idx          # (N,) index of the current waypoint (num_wp when all reached)
+    uint8_t* active          # (N,) slot holds an agent that is still playing
+    uint8_t* obstacle        # (N,) ended agent left on the road as a static obstacle
+    float* lane_s            # [m] signed lateral offset from the associated centerline, + right
+    float* lane_alpha        # [rad] heading minus lane direction, in (-pi, pi], + = rotated left
+    uint8_t* lane_valid      # 1 when a centerline was found within lane_radius
+    uint8_t* events          # EV_* bits of the last step
+    uint8_t* ever            # EV_* bits accumulated over the episode
+    int32_t* road_idx        # (N, max_road) road segments chosen by the events gather
+    int32_t* road_n          # (N,) number of valid entries in road_idx
+    int32_t* act_i           # (N, 2) discrete action indices (accel, steer)
+    float* act_f             # (N, 2) continuous actions [m/s^2], [rad]
+    float* reward            # (N,) summed reward of the last step
+    float* terms             # (N, NUM_TERMS) per-term reward of the last step
+    uint8_t* term            # (N,) terminated in the last step
+    uint8_t* trunc           # (N,) truncated (time limit) in the last step
+    float* obs               # (N, obs_dim) observations
+    float* final_obs         # (N, obs_dim) observation at the end of an agent's episode
+    # static vehicles (W * S)
+    float* st_x              # [m]
+    float* st_y              # [m]
+    float* st_cos            # cos(heading)
+    float* st_sin            # sin(heading)
+    float* st_len            # [m]
+    float* st_wid            # [m]
+    uint8_t* st_valid        # slot holds a static vehicle
+    # pedestrians (W * P)
+    float* ped_path          # (W*P, T, 2) [m] path polyline
+    int32_t* ped_np          # valid path points
+    float* ped_speed         # [m/s] walking speed
+    float* ped_start         # [s] start time
+    float* ped_len           # [m] box length
+    float* ped_wid           # [m] box width
+    uint8_t* ped_valid       # slot holds a pedestrian
+    uint8_t* ped_here        # pedestrian is present (0 after vanishing at the path end)
+    float* ped_x             # [m] current centre
+    float* ped_y             # [m]
+    float* ped_px            # [m] centre before the last step
+    float* ped_py            # [m]
+    float* ped_cos           # cos(heading)
+    float* ped_sin           # sin(heading)
+    float* ped_vx            # [m/s] velocity, world frame
+    float* ped_vy            # [m/s]
+    # traffic lights (W * G)
+    int8_t* light_state      # LIGHT_* per signal group
+    float* light_time        # [s] until the group's next change
+    # worlds (W)
+    int32_t* map_id          # map of the world in the atlas
+    int32_t* step            # steps taken in the current episode
+    int32_t* max_steps       # episode length in steps
+    uint8_t* lights_on       # 0 in the episodes where every light stays off
+    uint8_t* done            # world ended in the last step (autoreset follows)
+    uint64_t* rng_key        # counter-based RNG key of the world
+    uint64_t* rng_ctr        # counter-based RNG counter of the world
+    double* term_sum         # (W, NUM_TERMS) per-term reward sums over the episode
+    int64_t* ev_count        # (W, NUM_STATS) event counts over the episode
+    double* dist             # [m] distance driven by all agents of the episode
+    int32_t* cand            # (W, cand_cap) scratch: candidate indices
+    float* cand_d            # (W, cand_cap) scratch: candidate squared distances [m^2]

@@ -1,0 +1,221 @@
+# cython: language_level=3
+"""`World`: binds the env's NumPy buffers to the C structs and runs the step chain over all
+worlds in parallel (OpenMP `prange`, one world per iteration, static schedule). Worlds never
+share mutable state, so results do not depend on the number of threads."""
+
+import time
+
+import numpy as np
+
+cimport numpy as cnp
+from cython.parallel cimport prange
+from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t
+from selfplaydrive._sim.common cimport Sim, Params, Atlas
+from selfplaydrive._sim.physics cimport physics_world
+from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world, road_world
+from selfplaydrive._sim.reward cimport reward_world, finalize_world
+from selfplaydrive._sim.observe cimport observe_world
+
+cnp.import_array()
+
+STAGES = ("physics", "events", "reward", "observation", "finalize")
+
+
+cdef void* ptr(dict arrays, str name, object dtype, list keep) except NULL:
+    """Data pointer of arrays[name] after checking dtype and C-contiguity."""
+    a = arrays[name]
+    if not isinstance(a, np.ndarray) or a.dtype != np.dtype(dtype) or not a.flags.c_contiguous:
+        raise TypeError(f"buffer {name!r} must be a C-contiguous {np.dtype(dtype)} array, got "
+                        f"{getattr(a, 'dtype', type(a))}")
+    if a.size == 0:
+        a = np.zeros(1, dtype=dtype)  # never dereferenced: counts are 0; keeps the pointer valid
+    keep.append(a)
+    return cnp.PyArray_DATA(a)
+
+
+cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
+    """The whole chain for world `w` (section 2): physics, events, reward, observation."""
+    physics_world(sim, prm, w)
+    lights_peds_world(sim, prm, w)
+    collisions_world(sim, prm, w)
+    road_world(sim, atlas, prm, w)
+    reward_world(sim, prm, w)
+    observe_world(sim, atlas, prm, w)
+    finalize_world(sim, prm, w)
+
+
+cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
+    """After packing a new scenario into world `w`: place pedestrians, gather road data, observe."""
+    cdef int a, i, k
+    peds_world(sim, prm, w)
+    for k in range(w * sim.P, (w + 1) * sim.P):
+        sim.ped_px[k] = sim.ped_x[k]
+        sim.ped_py[k] = sim.ped_y[k]
+    road_world(sim, atlas, prm, w)
+    for a in range(sim.A):
+        i = w * sim.A + a
+        sim.events[i] = 0  # events found while placing the scenario earn nothing
+    observe_world(sim, atlas, prm, w)
+
+
+cdef class World:
+    """Owns pointers into the env's buffers and steps all worlds.
+
+    Args:
+        dims: W, A, S, P, K, T, G, max_obj, max_road, cand_cap, obs_dim.
+        state: Buffers named as the `Sim` fields (sim/buffers.py allocates them).
+        atlas: Concatenated map arrays named as the `Atlas` fields (sim/atlas.py).
+        params: Scalars named as the `Params` fields plus accel_table, steer_table, coeff_scale.
+    """
+
+    cdef Sim sim
+    cdef Atlas atlas
+    cdef Params prm
+    cdef list keep
+    cdef public dict timings
+
+    def __init__(self, dict dims, dict state, dict atlas, dict params):
+        self.keep = []
+        self.timings = {name: 0.0 for name in STAGES + ("reset",)}
+        self._bind_dims(dims)
+        self._bind_agents(state)
+        self._bind_others(state)
+        self._bind_atlas(atlas)
+        self._bind_params(params)
+
+    def _bind_dims(self, dict d):
+        self.sim.W = d["W"]; self.sim.A = d["A"]; self.sim.S = d["S"]; self.sim.P = d["P"]
+        self.sim.K = d["K"]; self.sim.T = d["T"]; self.sim.G = d["G"]
+        self.sim.max_obj = d["max_obj"]; self.sim.max_road = d["max_road"]
+        self.sim.cand_cap = d["cand_cap"]; self.sim.obs_dim = d["obs_dim"]
+
+    def _bind_agents(self, dict s):
+        cdef list k = self.keep
+        f4, u1, i4 = np.float32, np.uint8, np.int32
+        self.sim.x = <float*>ptr(s, "x", f4, k); self.sim.y = <float*>ptr(s, "y", f4, k)
+        self.sim.heading = <float*>ptr(s, "heading", f4, k)
+        self.sim.hcos = <float*>ptr(s, "hcos", f4, k); self.sim.hsin = <float*>ptr(s, "hsin", f4, k)
+        self.sim.speed = <float*>ptr(s, "speed", f4, k)
+        self.sim.px = <float*>ptr(s, "px", f4, k); self.sim.py = <float*>ptr(s, "py", f4, k)
+        self.sim.pheading = <float*>ptr(s, "pheading", f4, k)
+        self.sim.length = <float*>ptr(s, "length", f4, k); self.sim.width = <float*>ptr(s, "width", f4, k)
+        self.sim.a_long = <float*>ptr(s, "a_long", f4, k); self.sim.a_lat = <float*>ptr(s, "a_lat", f4, k)
+        self.sim.coeffs = <float*>ptr(s, "coeffs", f4, k); self.sim.hidden = <float*>ptr(s, "hidden", f4, k)
+        self.sim.waypoints = <float*>ptr(s, "waypoints", f4, k)
+        self.sim.num_wp = <int32_t*>ptr(s, "num_wp", i4, k); self.sim.wp_idx = <int32_t*>ptr(s, "wp_idx", i4, k)
+        self.sim.active = <uint8_t*>ptr(s, "active", u1, k); self.sim.obstacle = <uint8_t*>ptr(s, "obstacle", u1, k)
+        self.sim.lane_s = <float*>ptr(s, "lane_s", f4, k); self.sim.lane_alpha = <float*>ptr(s, "lane_alpha", f4, k)
+        self.sim.lane_valid = <uint8_t*>ptr(s, "lane_valid", u1, k)
+        self.sim.events = <uint8_t*>ptr(s, "events", u1, k); self.sim.ever = <uint8_t*>ptr(s, "ever", u1, k)
+        self.sim.road_idx = <int32_t*>ptr(s, "road_idx", i4, k); self.sim.road_n = <int32_t*>ptr(s, "road_n", i4, k)
+        self.sim.act_i = <int32_t*>ptr(s, "act_i", i4, k); self.sim.act_f = <float*>ptr(s, "act_f", f4, k)
+        self.sim.reward = <float*>ptr(s, "reward", f4, k); self.sim.terms = <float*>ptr(s, "terms", f4, k)
+        self.sim.term = <uint8_t*>ptr(s, "term", u1, k); self.sim.trunc = <uint8_t*>ptr(s, "trunc", u1, k)
+        self.sim.obs = <float*>ptr(s, "obs", f4, k); self.sim.final_obs = <float*>ptr(s, "final_obs", f4, k)
+
+    def _bind_others(self, dict s):
+        cdef list k = self.keep
+        f4, f8, u1, i1, i4, i8, u8 = np.float32, np.float64, np.uint8, np.int8, np.int32, np.int64, np.uint64
+        self.sim.st_x = <float*>ptr(s, "st_x", f4, k); self.sim.st_y = <float*>ptr(s, "st_y", f4, k)
+        self.sim.st_cos = <float*>ptr(s, "st_cos", f4, k); self.sim.st_sin = <float*>ptr(s, "st_sin", f4, k)
+        self.sim.st_len = <float*>ptr(s, "st_len", f4, k); self.sim.st_wid = <float*>ptr(s, "st_wid", f4, k)
+        self.sim.st_valid = <uint8_t*>ptr(s, "st_valid", u1, k)
+        self.sim.ped_path = <float*>ptr(s, "ped_path", f4, k); self.sim.ped_np = <int32_t*>ptr(s, "ped_np", i4, k)
+        self.sim.ped_speed = <float*>ptr(s, "ped_speed", f4, k); self.sim.ped_start = <float*>ptr(s, "ped_start", f4, k)
+        self.sim.ped_len = <float*>ptr(s, "ped_len", f4, k); self.sim.ped_wid = <float*>ptr(s, "ped_wid", f4, k)
+        self.sim.ped_valid = <uint8_t*>ptr(s, "ped_valid", u1, k); self.sim.ped_here = <uint8_t*>ptr(s, "ped_here", u1, k)
+        self.sim.ped_x = <float*>ptr(s, "ped_x", f4, k); self.sim.ped_y = <float*>ptr(s, "ped_y", f4, k)
+        self.sim.ped_px = <float*>ptr(s, "ped_px", f4, k); self.sim.ped_py = <float*>ptr(s, "ped_py", f4, k)
+        self.sim.ped_cos = <float*>ptr(s, "ped_cos", f4, k); self.sim.ped_sin = <float*>ptr(s, "ped_sin", f4, k)
+        self.sim.ped_vx = <float*>ptr(s, "ped_vx", f4, k); self.sim.ped_vy = <float*>ptr(s, "ped_vy", f4, k)
+        self.sim.light_state = <int8_t*>ptr(s, "light_state", i1, k)
+        self.sim.light_time = <float*>ptr(s, "light_time", f4, k)
+        self.sim.map_id = <int32_t*>ptr(s, "map_id", i4, k); self.sim.step = <int32_t*>ptr(s, "step", i4, k)
+        self.sim.max_steps = <int32_t*>ptr(s, "max_steps", i4, k)
+        self.sim.lights_on = <uint8_t*>ptr(s, "lights_on", u1, k); self.sim.done = <uint8_t*>ptr(s, "done", u1, k)
+        self.sim.rng_key = <uint64_t*>ptr(s, "rng_key", u8, k); self.sim.rng_ctr = <uint64_t*>ptr(s, "rng_ctr", u8, k)
+        self.sim.term_sum = <double*>ptr(s, "term_sum", f8, k); self.sim.ev_count = <int64_t*>ptr(s, "ev_count", i8, k)
+        self.sim.dist = <double*>ptr(s, "dist", f8, k)
+        self.sim.cand = <int32_t*>ptr(s, "cand", i4, k); self.sim.cand_d = <float*>ptr(s, "cand_d", f4, k)
+
+    def _bind_atlas(self, dict a):
+        cdef list k = self.keep
+        f4, i1, i4, i8 = np.float32, np.int8, np.int32, np.int64
+        self.atlas.num_maps = len(a["grid_cell"])
+        self.atlas.seg_start = <float*>ptr(a, "seg_start", f4, k); self.atlas.seg_end = <float*>ptr(a, "seg_end", f4, k)
+        self.atlas.seg_mid = <float*>ptr(a, "seg_mid", f4, k); self.atlas.seg_dir = <float*>ptr(a, "seg_dir", f4, k)
+        self.atlas.seg_len = <float*>ptr(a, "seg_len", f4, k); self.atlas.seg_type = <int8_t*>ptr(a, "seg_type", i1, k)
+        self.atlas.seg_group = <int32_t*>ptr(a, "seg_group", i4, k)
+        self.atlas.grid_origin = <float*>ptr(a, "grid_origin", f4, k); self.atlas.grid_cell = <float*>ptr(a, "grid_cell", f4, k)
+        self.atlas.grid_nx = <int32_t*>ptr(a, "grid_nx", i4, k); self.atlas.grid_ny = <int32_t*>ptr(a, "grid_ny", i4, k)
+        self.atlas.cell_base = <int64_t*>ptr(a, "cell_base", i8, k)
+        self.atlas.cell_offsets = <int32_t*>ptr(a, "cell_offsets", i4, k)
+        self.atlas.cell_items = <int32_t*>ptr(a, "cell_items", i4, k)
+        self.atlas.max_seg_len = <float*>ptr(a, "max_seg_len", f4, k)
+
+    def _bind_params(self, dict p):
+        cdef list k = self.keep
+        self.prm.dt = p["dt"]; self.prm.physics = p["physics"]; self.prm.wheelbase_ratio = p["wheelbase_ratio"]
+        self.prm.gravity = p["gravity"]; self.prm.max_speed = p["max_speed"]; self.prm.discrete = p["discrete"]
+        self.prm.accel_table = <float*>ptr(p, "accel_table", np.float32, k)
+        self.prm.steer_table = <float*>ptr(p, "steer_table", np.float32, k)
+        self.prm.comfort_limit = p["comfort_limit"]; self.prm.obs_radius = p["obs_radius"]
+        self.prm.lane_radius = p["lane_radius"]; self.prm.terminate_threshold = p["terminate_threshold"]
+        self.prm.obstacle_mode = p["obstacle_mode"]; self.prm.velocity_reward = p["velocity_reward"]
+        self.prm.velocity_min = p["velocity_min"]; self.prm.waypoint_reward = p["waypoint_reward"]
+        self.prm.center_max_angle = p["center_max_angle"]; self.prm.light_min = p["light_min"]
+        self.prm.light_max = p["light_max"]; self.prm.ped_vanish = p["ped_vanish"]
+        self.prm.pos_scale = p["pos_scale"]; self.prm.wp_scale = p["wp_scale"]
+        self.prm.length_scale = p["length_scale"]; self.prm.width_scale = p["width_scale"]
+        self.prm.lateral_scale = p["lateral_scale"]
+        self.prm.coeff_scale = <float*>ptr(p, "coeff_scale", np.float32, k)
+        self.prm.max_substeps = p["max_substeps"]
+
+    def step(self, int num_threads=1, bint profile=False):
+        """Advance every world one step; with `profile`, stage by stage with timings."""
+        cdef int w, W = self.sim.W
+        if profile:
+            self._step_profiled(num_threads)
+            return
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                step_one(&self.sim, &self.atlas, &self.prm, w)
+
+    def _step_profiled(self, int num_threads):
+        cdef int w, W = self.sim.W
+        t0 = time.perf_counter()
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                physics_world(&self.sim, &self.prm, w)
+        t1 = time.perf_counter()
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                lights_peds_world(&self.sim, &self.prm, w)
+                collisions_world(&self.sim, &self.prm, w)
+                road_world(&self.sim, &self.atlas, &self.prm, w)
+        t2 = time.perf_counter()
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                reward_world(&self.sim, &self.prm, w)
+        t3 = time.perf_counter()
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                observe_world(&self.sim, &self.atlas, &self.prm, w)
+        t4 = time.perf_counter()
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                finalize_world(&self.sim, &self.prm, w)
+        t5 = time.perf_counter()
+        for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)):
+            self.timings[name] += dt
+
+    def after_reset(self, cnp.ndarray worlds, int num_threads=1):
+        """Finish the reset of the listed worlds (int32 indices) after their scenario was packed."""
+        cdef const int32_t[::1] ws = np.ascontiguousarray(worlds, dtype=np.int32)
+        cdef int k, n = ws.shape[0]
+        for k in range(n):
+            if not 0 <= ws[k] < self.sim.W:
+                raise IndexError(f"world index {ws[k]} out of range [0, {self.sim.W})")
+        with nogil:
+            for k in prange(n, num_threads=num_threads, schedule="static"):
+                reset_one(&self.sim, &self.atlas, &self.prm, ws[k])

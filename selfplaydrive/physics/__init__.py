@@ -1,0 +1,6 @@
+"""Vehicle dynamics models (paper section 2.6). Each selects a Cython kernel once, at
+construction; the step never branches on a Python object."""
+
+from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
+
+__all__ = ["BicycleModel", "FrictionBicycleModel"]

@@ -1,0 +1,135 @@
+"""Simulator throughput benchmark (spec item 10): the paper configuration with random actions.
+
+Steps `worlds` x 32 agents (about 1,000 agents) with the friction bicycle model, 63 objects
+and 200 road segments observed, at each requested thread count, and prints agent-steps/s and
+the time per stage (physics, events, reward, observation, finalize, reset). The CLI exposes
+it as `selfplaydrive bench [--json] [--map PATH]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+
+def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="selfplaydrive bench", description=__doc__.splitlines()[0])
+    p.add_argument(
+        "--map",
+        default="default",
+        help="map spec for selfplaydrive.maps.loader.load_map (default: bundled map)",
+    )
+    p.add_argument("--worlds", type=int, default=32, help="worlds stepped together (32 agents each)")
+    p.add_argument("--steps", type=int, default=300, help="timed steps per thread count")
+    p.add_argument("--warmup", type=int, default=30, help="untimed steps first")
+    p.add_argument("--threads", default="1,2", help="comma-separated thread counts")
+    p.add_argument("--repeats", type=int, default=3, help="timed runs per thread count; the best is reported")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    return p.parse_args(argv)
+
+
+def _make_env(road_map, worlds: int, threads: int, seed: int, profile: bool):
+    from selfplaydrive.scenario.spawner import PaperSpawner
+    from selfplaydrive.sim.vec_env import VecEnv
+
+    return VecEnv(road_map, PaperSpawner(), worlds, seed=seed, num_threads=threads, profile=profile)
+
+
+def _run(env, steps: int, warmup: int, seed: int) -> float:
+    rng = np.random.default_rng(seed)
+    acts = rng.integers(0, [7, 13], size=(steps + warmup, env.num_agents, 2))
+    env.reset(seed)
+    for k in range(warmup):
+        env.step(acts[k])
+    t0 = time.perf_counter()
+    agent_steps = 0
+    for k in range(warmup, warmup + steps):
+        agent_steps += int(np.count_nonzero(env.masks))
+        env.step(acts[k])
+    return agent_steps / (time.perf_counter() - t0)
+
+
+def _stage_times(road_map, args, threads: int) -> dict[str, float]:
+    env = _make_env(road_map, args.worlds, threads, args.seed, profile=True)
+    _run(env, args.steps, args.warmup, args.seed)
+    total_steps = args.steps + args.warmup
+    return {k: v / total_steps * 1e3 for k, v in env.timings.items()}  # ms per step
+
+
+def main(argv: Sequence[str] | None = None) -> dict[str, object]:
+    """Run the benchmark; print text or JSON (keys map, num_agents, obs_dim, results)."""
+    from selfplaydrive.maps.loader import load_map
+
+    args = _parse(argv)
+    road_map = load_map(args.map)
+    results, stages = [], {}
+    env = None
+    for threads in [int(t) for t in args.threads.split(",")]:
+        env = _make_env(road_map, args.worlds, threads, args.seed, profile=False)
+        best = max(_run(env, args.steps, args.warmup, args.seed) for _ in range(max(1, args.repeats)))
+        results.append({"threads": threads, "agent_steps_per_s": round(best, 1)})
+        stages[threads] = _stage_times(road_map, args, threads)
+    assert env is not None
+    reset_ms = _reset_time(env)
+    out = {
+        "map": str(args.map),
+        "num_agents": env.num_agents,
+        "obs_dim": env.layout.obs_dim,
+        "results": results,
+        "stage_ms_per_step": stages,
+        "reset_ms_per_world": reset_ms,
+        "bytes_per_world": _bytes_per_world(env),
+    }
+    if args.json:
+        print(json.dumps(out))
+    else:
+        _print_text(out)
+    return out
+
+
+def _reset_time(env) -> dict[str, float]:
+    """Mean ms to reset one world: spawner sample + pack + kernel finish (and without sampling)."""
+    worlds = np.arange(env.num_worlds, dtype=np.int32)
+    t0 = time.perf_counter()
+    env._reset_worlds(worlds)
+    full = (time.perf_counter() - t0) / len(worlds) * 1e3
+    first = [env._sample(int(w)) for w in worlds]
+    from selfplaydrive.sim.buffers import pack
+
+    t0 = time.perf_counter()
+    for w, sc in zip(worlds, first, strict=True):
+        pack(env.buffers, env.dims, int(w), sc, env.params.dt, 1)
+    env._world.after_reset(worlds, 1)
+    packed = (time.perf_counter() - t0) / len(worlds) * 1e3
+    return {"with_spawner": round(full, 3), "pack_and_kernels": round(packed, 3)}
+
+
+def _bytes_per_world(env) -> int:
+    return int(sum(a.nbytes for a in env.buffers.values()) / env.num_worlds)
+
+
+def _print_text(out: dict[str, object]) -> None:
+    print(f"map {out['map']}: {out['num_agents']} agents, obs_dim {out['obs_dim']}")
+    base = None
+    for r in out["results"]:  # type: ignore[union-attr]
+        base = base or r["agent_steps_per_s"]
+        print(
+            f"  threads {r['threads']}: {r['agent_steps_per_s']:,.0f} agent-steps/s "
+            f"({r['agent_steps_per_s'] / base:.2f}x)"
+        )
+    for threads, st in out["stage_ms_per_step"].items():  # type: ignore[union-attr]
+        print(
+            f"  stages at {threads} thread(s), ms per step: "
+            + ", ".join(f"{k} {v:.3f}" for k, v in st.items())
+        )
+    print(f"  reset per world [ms]: {out['reset_ms_per_world']}")
+    print(f"  buffer bytes per world: {out['bytes_per_world']:,}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,318 @@
+"""`VecEnv`: many driving worlds stepped in one call (paper section 2; spec item 8).
+
+The env composes a list of maps, a spawner (anything with `sample(road_map, rng, map_index)`
+returning a `Scenario`), a physics model and an action table; it owns preallocated NumPy
+buffers that the Cython kernels (_sim/) read and write, zero copy.
+
+Buffers after `step` (N = num_worlds * agents per world):
+    observations (N, obs_dim) float32: next observation of every slot with `masks` set.
+    rewards (N,) float32, reward_terms (N, 8) float32 (columns `TERM_NAMES`), extra_terms
+        (N, len(reward_hooks)): valid where `reward_mask` (the agent acted this step).
+    terminations, truncations (N,) bool: the agent's episode ended this step.
+    final_observations (N, obs_dim): observation at the end, valid where either flag is set.
+    masks (N,) bool: slot holds an active agent that acts at the next step.
+
+Autoreset (same step): a world whose time is up or whose agents have all ended is resampled
+from the spawner inside `step`; its rows of `observations` then hold the new episode's first
+observations and `final_observations` keep the last ones of the agents that ended.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from types import SimpleNamespace
+
+import numpy as np
+
+from selfplaydrive._sim.world import STAGES, World
+from selfplaydrive.maps.roadmap import RoadMap
+from selfplaydrive.obs.config import ObsConfig, ObsHook
+from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
+from selfplaydrive.rewards.registry import TERM_NAMES, RewardHook
+from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
+from selfplaydrive.sim.atlas import build_atlas
+from selfplaydrive.sim.buffers import Dims, allocate, check_scenario, pack
+from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.sim.params import SimParams
+
+EVENT_NAMES = (
+    "collision",
+    "pedestrian_collision",
+    "offroad",
+    "red_light",
+    "waypoint",
+    "comfort",
+    "terminated",
+    "truncated",
+)
+EVER_BITS = {"collision": 1, "pedestrian_collision": 2, "offroad": 4, "red_light": 8}
+
+
+class VecEnv:
+    """Vectorized multi-agent driving env.
+
+    Args:
+        maps: One `RoadMap` or a sequence; worlds draw a map uniformly from their own generator.
+        spawner: Object with `sample(road_map, rng, map_index=0) -> Scenario`.
+        num_worlds: Worlds stepped together.
+        physics: A physics model (default `FrictionBicycleModel()`, section 2.6).
+        actions: `DiscreteActions()` (default, section 2.4) or `ContinuousActions()`.
+        params: `SimParams` (default: the paper's constants).
+        obs: `ObsConfig` (63 objects, 200 road segments within 100 m).
+        seed: Seed of the first `reset`.
+        num_threads: OpenMP threads stepping the worlds (results do not depend on it).
+        terminated_vehicle: "remove" or "obstacle" (stays as a static obstacle).
+        reward_hooks: Python reward terms run after the kernels.
+        obs_hooks: Python observation features appended after the kernel columns.
+        profile: Time each stage (slower: one parallel loop per stage).
+    """
+
+    def __init__(
+        self,
+        maps: RoadMap | Sequence[RoadMap],
+        spawner: object,
+        num_worlds: int,
+        physics: BicycleModel | None = None,
+        actions: DiscreteActions | ContinuousActions | None = None,
+        params: SimParams | None = None,
+        obs: ObsConfig | None = None,
+        seed: int = 0,
+        num_threads: int = 1,
+        terminated_vehicle: str = "remove",
+        reward_hooks: Sequence[RewardHook] = (),
+        obs_hooks: Sequence[ObsHook] = (),
+        profile: bool = False,
+    ) -> None:
+        self.maps = [maps] if isinstance(maps, RoadMap) else list(maps)
+        if not self.maps or not all(isinstance(m, RoadMap) for m in self.maps):
+            raise ValueError(f"maps: expected a RoadMap or a non-empty sequence of RoadMaps, got {maps!r}")
+        if not hasattr(spawner, "sample"):
+            raise ValueError(
+                f"spawner: expected an object with a sample(road_map, rng, map_index) method, got {spawner!r}"
+            )
+        if int(num_worlds) < 1:
+            raise ValueError(f"num_worlds: expected an integer >= 1, got {num_worlds!r}")
+        if terminated_vehicle not in ("remove", "obstacle"):
+            raise ValueError(
+                f"terminated_vehicle: expected 'remove' or 'obstacle', got {terminated_vehicle!r}"
+            )
+        self.spawner = spawner
+        self.num_worlds = int(num_worlds)
+        self.physics = physics if physics is not None else FrictionBicycleModel()
+        self.action_table = actions if actions is not None else DiscreteActions()
+        self.params = params if params is not None else SimParams()
+        self.obs_config = (
+            obs
+            if obs is not None
+            else ObsConfig(self.params.max_objects, self.params.max_road, self.params.obs_radius)
+        )
+        self.num_threads = _threads(num_threads)
+        self.terminated_vehicle = terminated_vehicle
+        self.reward_hooks = list(reward_hooks)
+        self.obs_hooks = list(obs_hooks)
+        self.profile = bool(profile)
+        self.layout = ObsLayout(
+            self.obs_config.max_objects, self.obs_config.max_road, sum(int(h.dim) for h in self.obs_hooks)
+        )
+        self._seed = seed
+        self._setup_rngs(seed)
+        first = self._sample(0)
+        G = max([1] + [m.num_signal_groups for m in self.maps])
+        p = self.params
+        self.dims = Dims.of(
+            first,
+            self.num_worlds,
+            G,
+            self.obs_config.max_objects,
+            self.obs_config.max_road,
+            p.cand_cap,
+            self.layout.obs_dim,
+        )
+        self.buffers = allocate(self.dims)
+        self.atlas = build_atlas(self.maps)
+        self._world = World(self.dims.__dict__, self.buffers, self.atlas, self._kernel_params())
+        self._expose()
+        self.episode_stats: list[dict[str, object]] = []
+        self._pending_first = first
+
+    # construction helpers -------------------------------------------------------------------
+    def _kernel_params(self) -> dict[str, object]:
+        k = self.params.kernel_params()
+        k.update(self.physics.kernel_params())
+        k["obs_radius"] = self.obs_config.radius
+        k["pos_scale"] = self.obs_config.radius
+        k["discrete"] = int(self.action_table.discrete)
+        k["accel_table"] = np.ascontiguousarray(self.action_table.accel, dtype=np.float32)
+        k["steer_table"] = np.ascontiguousarray(self.action_table.steer, dtype=np.float32)
+        k["obstacle_mode"] = int(self.terminated_vehicle == "obstacle")
+        return k
+
+    def _expose(self) -> None:
+        b = self.buffers
+        self.num_agents = self.dims.W * self.dims.A
+        self.agents_per_world = self.dims.A
+        self.observations = b["obs"]
+        self.final_observations = b["final_obs"]
+        self.rewards = b["reward"]
+        self.reward_terms = b["terms"]
+        self.extra_terms = np.zeros((self.num_agents, len(self.reward_hooks)), dtype=np.float32)
+        self.terminations = b["term"].view(bool)
+        self.truncations = b["trunc"].view(bool)
+        self.masks = b["active"].view(bool)
+        self.reward_mask = np.zeros(self.num_agents, dtype=bool)
+        self.term_names = TERM_NAMES + tuple(h.name for h in self.reward_hooks)
+        views = {}
+        for name, arr in b.items():
+            v = arr.view()
+            v.flags.writeable = False
+            views[name] = v
+        self.state = SimpleNamespace(**views)
+        self.observation_space = _box(self.layout)
+        self.action_space = self.action_table.space
+
+    def _setup_rngs(self, seed: int | None) -> None:
+        root = np.random.default_rng(seed)
+        self._world_rngs = [
+            np.random.default_rng(int(s)) for s in root.integers(0, 2**63 - 1, size=self.num_worlds)
+        ]
+
+    def _sample(self, w: int):
+        rng = self._world_rngs[w]
+        m = int(rng.integers(len(self.maps))) if len(self.maps) > 1 else 0
+        return self.spawner.sample(self.maps[m], rng, map_index=m)
+
+    # stepping -------------------------------------------------------------------------------
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Start a new episode in every world; same seed, same rollout (any thread count).
+
+        Returns:
+            The (N, obs_dim) observations buffer.
+        """
+        if seed is not None or self._pending_first is None:
+            self._setup_rngs(self._seed if seed is None else seed)
+            if seed is not None:
+                self._seed = seed
+            self._pending_first = self._sample(0)
+        self.episode_stats.clear()
+        self._reset_worlds(np.arange(self.num_worlds, dtype=np.int32), first=self._pending_first)
+        self._pending_first = None
+        self.terminations[:] = False
+        self.truncations[:] = False
+        self.rewards[:] = 0.0
+        self.reward_terms[:] = 0.0
+        self._run_obs_hooks(None)
+        return self.observations
+
+    def step(self, actions: np.ndarray) -> None:
+        """Apply `actions` ((N, 2): int indices for discrete, float32 for continuous) to every
+        agent, step all worlds, autoreset ended worlds. Results are in the env's buffers.
+
+        Raises:
+            ValueError: Actions of the wrong type, shape or dtype, out of range or not finite.
+        """
+        a = self.action_table.validate(actions, self.num_agents)
+        np.copyto(self.buffers["act_i" if self.action_table.discrete else "act_f"], a)
+        np.copyto(self.reward_mask, self.masks)
+        self._world.step(self.num_threads, self.profile)
+        self._run_reward_hooks()
+        ended = self.terminations | self.truncations
+        self._run_obs_hooks(ended)
+        done = np.flatnonzero(self.buffers["done"]).astype(np.int32)
+        if len(done):
+            self._record_episodes(done)
+            self._reset_worlds(done)
+            self._run_obs_hooks(None)
+
+    def _reset_worlds(self, worlds: np.ndarray, first=None) -> None:
+        import time
+
+        t0 = time.perf_counter()
+        for w in worlds:
+            sc = first if (first is not None and w == 0) else self._sample(int(w))
+            check_scenario(sc, self.dims, len(self.maps))
+            key = int(self._world_rngs[int(w)].integers(0, 2**63 - 1))
+            pack(self.buffers, self.dims, int(w), sc, self.params.dt, key)
+        self._world.after_reset(worlds, self.num_threads)
+        self._world.timings["reset"] += time.perf_counter() - t0
+
+    def _run_reward_hooks(self) -> None:
+        for k, hook in enumerate(self.reward_hooks):
+            r = np.asarray(hook(self.state), dtype=np.float32)
+            if r.shape != (self.num_agents,) or not np.all(np.isfinite(r)):
+                raise ValueError(
+                    f"reward hook {hook.name!r}: expected ({self.num_agents},) finite values, "
+                    f"got shape {r.shape}"
+                )
+            r = np.where(self.reward_mask, r, 0.0).astype(np.float32)
+            self.extra_terms[:, k] = r
+            self.rewards += r
+        if self.reward_hooks:
+            per_world = self.extra_terms.reshape(self.num_worlds, self.dims.A, -1).sum(axis=1)
+            self._extra_sums = (
+                getattr(self, "_extra_sums", np.zeros_like(per_world, dtype=np.float64)) + per_world
+            )
+
+    def _run_obs_hooks(self, ended: np.ndarray | None) -> None:
+        col = self.layout.kernel_dim
+        for hook in self.obs_hooks:
+            f = np.asarray(hook(self.state), dtype=np.float32)
+            if f.shape != (self.num_agents, hook.dim) or not np.all(np.isfinite(f)):
+                raise ValueError(
+                    f"obs hook {hook.name!r}: expected ({self.num_agents}, {hook.dim}) finite values, "
+                    f"got {f.shape}"
+                )
+            rows = self.masks if ended is None else (self.masks | ended)
+            self.observations[rows, col : col + hook.dim] = f[rows]
+            if ended is not None:
+                self.final_observations[ended, col : col + hook.dim] = f[ended]
+            col += hook.dim
+
+    # statistics -----------------------------------------------------------------------------
+    def _record_episodes(self, worlds: np.ndarray) -> None:
+        b, A = self.buffers, self.dims.A
+        extra = getattr(self, "_extra_sums", None)
+        for w in worlds:
+            a = slice(w * A, (w + 1) * A)
+            ever = b["ever"][a]
+            rec: dict[str, object] = {
+                "world": int(w),
+                "map": int(b["map_id"][w]),
+                "length_s": float(b["step"][w] * self.params.dt),
+                "num_agents": int(np.count_nonzero(b["agent_valid"][a])),
+                "km": float(b["dist"][w] / 1000.0),
+                "terms": {n: float(v) for n, v in zip(TERM_NAMES, b["term_sum"][w], strict=True)},
+                "events": {n: int(v) for n, v in zip(EVENT_NAMES, b["ev_count"][w], strict=True)},
+                "agents_with": {n: int(np.count_nonzero(ever & bit)) for n, bit in EVER_BITS.items()},
+            }
+            if extra is not None:
+                rec["terms"].update({h.name: float(extra[w, k]) for k, h in enumerate(self.reward_hooks)})
+                extra[w] = 0.0
+            self.episode_stats.append(rec)
+
+    def pop_episode_stats(self) -> list[dict[str, object]]:
+        """Statistics of the episodes finished since the last call (per-term sums, event
+        counts, agents with at least one collision / off-road / red-light event, km driven)."""
+        out, self.episode_stats = self.episode_stats, []
+        return out
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds spent per stage since construction (stages other than reset need profile=True)."""
+        return dict(self._world.timings)
+
+    @property
+    def stage_names(self) -> tuple[str, ...]:
+        return (*STAGES, "reset")
+
+
+def _threads(n: int) -> int:
+    if int(n) < 1:
+        raise ValueError(f"num_threads: expected an integer >= 1, got {n!r}")
+    return int(n)
+
+
+def _box(layout: ObsLayout):
+    import gymnasium as gym
+
+    low, high = layout.bounds()
+    return gym.spaces.Box(low, high, dtype=np.float32)

@@ -1,0 +1,185 @@
+"""VecEnv: action validation, autoreset, final observations, statistics, lights, pedestrians,
+hooks and determinism across thread counts (spec items 7-9)."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+from helpers import FixedSpawner, RandomSpawner, cross_map, make_scenario
+
+from selfplaydrive.sim import ContinuousActions, SimParams, VecEnv
+
+
+@pytest.fixture(scope="module")
+def cmap():
+    return cross_map()
+
+
+def test_action_validation_names_argument_value_and_expectation(straight_map):
+    env = VecEnv(straight_map, FixedSpawner(make_scenario([dict(xy=(0, -2))])), 2)
+    env.reset(0)
+    N = env.num_agents
+    with pytest.raises(ValueError, match=r"actions: expected shape \(8, 2\), got \(8, 3\)"):
+        env.step(np.zeros((N, 3), np.int64))
+    with pytest.raises(ValueError, match="expected an integer array"):
+        env.step(np.zeros((N, 2), np.float32))
+    bad = np.zeros((N, 2), np.int64)
+    bad[5, 1] = 13
+    with pytest.raises(
+        ValueError, match=r"actions\[5, 1\] \(steering index\) = 13: expected an integer in \[0, 13\)"
+    ):
+        env.step(bad)
+    with pytest.raises(ValueError, match="numpy array"):
+        env.step([[0, 0]] * N)
+    cenv = VecEnv(
+        straight_map, FixedSpawner(make_scenario([dict(xy=(0, -2))])), 1, actions=ContinuousActions()
+    )
+    cenv.reset(0)
+    a = np.zeros((cenv.num_agents, 2), np.float32)
+    a[2, 0] = np.nan
+    with pytest.raises(ValueError, match=r"actions\[2, 0\] = nan: expected a finite number"):
+        cenv.step(a)
+    a[2, 0] = 5.0
+    with pytest.raises(ValueError, match=r"actions\[2, 0\] = 5.0: expected a value in \[-4.0, 4.0\]"):
+        cenv.step(a)
+    a[2, 0] = 0.0
+    a[0, 0] = 1.0
+    cenv.step(a)
+    assert cenv.buffers["speed"][0] == pytest.approx(0.1)
+
+
+def test_autoreset_truncation_final_observation_and_stats(straight_map):
+    sc = make_scenario([dict(xy=(-50, -2), speed=10.0), dict(xy=(0, -2), speed=5.0)], episode_length=1.0)
+    env = VecEnv(straight_map, FixedSpawner(sc), 2)
+    env.reset(0)
+    acts = np.tile(np.array([3, 6]), (env.num_agents, 1))
+    for _ in range(9):
+        env.step(acts)
+        assert not env.truncations.any()
+    before = env.observations[0].copy()
+    env.step(acts)  # step 10: time limit of 1 s
+    assert env.truncations[[0, 1, 4, 5]].all() and not env.terminations.any()
+    # final observation: speed feature of the ended agent; the new episode starts at -50 again
+    assert env.final_observations[0, 2] == pytest.approx(10.0 / 40.0)
+    assert not np.array_equal(env.final_observations[0], before)
+    assert env.buffers["x"][0] == pytest.approx(-50.0) and env.buffers["step"][0] == 0
+    assert env.masks[[0, 1, 4, 5]].all()
+    stats = env.pop_episode_stats()
+    assert len(stats) == 2 and stats[0]["num_agents"] == 2
+    assert stats[0]["km"] == pytest.approx((10.0 + 5.0) * 1.0 / 1000.0, rel=1e-4)
+    assert stats[0]["events"]["truncated"] == 2
+    assert stats[0]["terms"]["velocity"] > 0
+
+
+def test_world_resets_when_all_agents_terminated(straight_map):
+    sc = make_scenario([dict(xy=(0, -3.2), speed=5.0, coeffs=dict(offroad=0.9))], episode_length=10.0)
+    env = VecEnv(straight_map, FixedSpawner(sc), 1)
+    env.reset(0)
+    env.step(np.tile(np.array([3, 6]), (env.num_agents, 1)))
+    assert env.terminations[0] and env.masks[0]  # ended, and the world was resampled
+    st = env.pop_episode_stats()
+    assert st[0]["events"]["offroad"] == 1 and st[0]["agents_with"]["offroad"] == 1
+    assert st[0]["events"]["terminated"] == 1
+
+
+def test_lights_change_with_durations_in_range(cmap):
+    sc = make_scenario([dict(xy=(50, -1.75))], lights=[(1, 0.05), (3, 0.05)], episode_length=100.0)
+    env = VecEnv(cmap, FixedSpawner(sc), 3, params=SimParams(light_min=0.5, light_max=10.0))
+    env.reset(7)
+    b = env.buffers
+    seen, times = set(), []
+    for _ in range(300):
+        env.step(np.tile(np.array([3, 6]), (env.num_agents, 1)))
+        seen.update(b["light_state"].tolist())
+        times.extend(b["light_time"].tolist())
+    assert seen == {0, 1, 2, 3}
+    assert max(times) <= 10.0 and min(times) > 0.0
+    off = make_scenario([dict(xy=(50, -1.75))], episode_length=100.0)
+    off.light_state = np.array([1, 1], np.int8)
+    off.light_time_left = np.array([0.05, 0.05], np.float32)  # lights_enabled False: stay off
+    env = VecEnv(cmap, FixedSpawner(off), 1)
+    env.reset(0)
+    for _ in range(20):
+        env.step(np.tile(np.array([3, 6]), (env.num_agents, 1)))
+    assert np.all(env.buffers["light_state"] == 0)
+
+
+@pytest.mark.parametrize("end, here", [("stand", 1), ("vanish", 0)])
+def test_pedestrian_waits_walks_and_stands_or_vanishes(straight_map, end, here):
+    ped = dict(path=[(0.0, 10.0), (0.0, 13.0)], speed=1.5, start=1.0)
+    env = VecEnv(
+        straight_map,
+        FixedSpawner(make_scenario([dict(xy=(-50, -2))], peds=[ped], episode_length=100.0)),
+        1,
+        params=SimParams(pedestrian_end=end),
+    )
+    env.reset(0)
+    b = env.buffers
+    acts = np.tile(np.array([3, 6]), (env.num_agents, 1))
+    for _ in range(9):  # t = 0.9: still waiting
+        env.step(acts)
+    assert (b["ped_x"][0], b["ped_y"][0], b["ped_vy"][0]) == (0.0, 10.0, 0.0)
+    for _ in range(11):  # t = 2.0: walked 1.5 m
+        env.step(acts)
+    assert b["ped_y"][0] == pytest.approx(11.5, abs=1e-4) and b["ped_vy"][0] == pytest.approx(1.5)
+    for _ in range(20):  # t = 4.0: path (3 m) done at t = 3
+        env.step(acts)
+    assert b["ped_y"][0] == pytest.approx(13.0) and b["ped_vy"][0] == 0.0 and b["ped_here"][0] == here
+
+
+def test_python_hooks_run_after_kernels(straight_map):
+    class Bonus:
+        name = "bonus"
+
+        def __call__(self, state):
+            return np.where(state.active, 1.0, 0.0).astype(np.float32)
+
+    class Speed2:
+        name = "speed2"
+        dim = 1
+
+        def __call__(self, state):
+            return (state.speed / 40.0)[:, None] ** 2
+
+    env = VecEnv(
+        straight_map,
+        FixedSpawner(make_scenario([dict(xy=(0, -2), speed=20.0)])),
+        1,
+        reward_hooks=[Bonus()],
+        obs_hooks=[Speed2()],
+    )
+    env.reset(0)
+    assert env.observations.shape[1] == env.layout.kernel_dim + 1
+    env.step(np.tile(np.array([3, 6]), (env.num_agents, 1)))
+    assert env.extra_terms[0, 0] == 1.0 and env.extra_terms[1, 0] == 0.0
+    assert env.rewards[0] == pytest.approx(env.reward_terms[0].sum() + 1.0)
+    assert env.observations[0, -1] == pytest.approx(0.25)
+    with pytest.raises(ValueError):
+        env.state.x[0] = 1.0  # read-only views
+
+
+def rollout_digest(cmap, threads: int, steps: int) -> str:
+    env = VecEnv(cmap, RandomSpawner(), 8, num_threads=threads, seed=123)
+    env.reset(123)
+    rng = np.random.default_rng(9)
+    h = hashlib.sha256()
+    for _ in range(steps):
+        env.step(rng.integers(0, [7, 13], size=(env.num_agents, 2)))
+        for arr in (
+            env.observations,
+            env.rewards,
+            env.reward_terms,
+            env.terminations,
+            env.truncations,
+            env.masks,
+        ):
+            h.update(arr.tobytes())
+    return h.hexdigest()
+
+
+def test_determinism_500_steps_one_and_two_threads(cmap):
+    d1 = rollout_digest(cmap, 1, 500)
+    assert d1 == rollout_digest(cmap, 2, 500)
+    assert d1 == rollout_digest(cmap, 1, 500)
