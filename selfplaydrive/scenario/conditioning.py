@@ -1,0 +1,188 @@
+"""Reward-conditioning coefficients (paper section 2.3) and hidden dynamics parameters (section 2.6).
+
+Each agent gets its own coefficients, drawn once per world reset, so one world holds a mix of
+cautious and careless drivers. The policy observes the coefficients (section 2.5); the hidden
+parameters (friction, action gains) are never observed.
+
+Column order is `COEFF_NAMES` / `HIDDEN_PARAMS` from `selfplaydrive.scenario.types`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS
+
+Range = tuple[float, float]
+_MODES = ("train", "eval")
+
+
+def _check_range(name: str, value: Sequence[float], allow_equal: bool = True) -> Range:
+    """Validate a (low, high) pair and return it as floats."""
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name} must be a (low, high) pair of numbers, got {value!r}") from exc
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi < lo or (hi == lo and not allow_equal):
+        raise ConfigError(f"{name} must be finite with low <= high, got ({lo}, {hi})")
+    return lo, hi
+
+
+class ConditioningSampler:
+    """Samples per-agent reward coefficients in the order of `COEFF_NAMES` (section 2.3).
+
+    Training mode draws every coefficient independently per agent. Evaluation mode (paper
+    section 5) returns one fixed vector: every penalty/reward coefficient at the maximum of its
+    training range, the lane-centre bias B = `eval_center_bias` (0) and the waypoint radius
+    D = `eval_waypoint_radius` (3 m).
+
+    Args:
+        mode: "train" (random draws) or "eval" (fixed evaluation coefficients).
+        waypoint_radius: D [m], U(low, high).
+        collision: C_collision, U(low, high).
+        offroad: C_offroad, U(low, high).
+        red_light: C_red, U(low, high).
+        comfort: C_comfort, U(low, high).
+        center_low: C_center range of the low mode.
+        center_high: C_center range of the high mode.
+        center_low_prob: Probability of the low mode of C_center.
+        center_bias: B [m], U(low, high); positive = right of the lane centre.
+        align_low: C_align range of the low mode.
+        align_high: C_align range of the high mode.
+        align_low_prob: Probability of the low mode of C_align.
+        eval_waypoint_radius: D [m] in eval mode.
+        eval_center_bias: B [m] in eval mode.
+
+    Raises:
+        ConfigError: On an unknown mode, a malformed range or a probability outside [0, 1].
+    """
+
+    def __init__(
+        self,
+        mode: str = "train",
+        waypoint_radius: Range = (1.0, 3.0),
+        collision: Range = (0.0, 1.0),
+        offroad: Range = (0.0, 1.0),
+        red_light: Range = (0.0, 1.0),
+        comfort: Range = (0.0, 0.01),
+        center_low: Range = (2.5e-5, 2.5e-4),
+        center_high: Range = (2.5e-4, 2.5e-3),
+        center_low_prob: float = 0.5,
+        center_bias: Range = (-0.3, 0.3),
+        align_low: Range = (2.5e-5, 2.5e-3),
+        align_high: Range = (2.5e-3, 2.5e-2),
+        align_low_prob: float = 0.5,
+        eval_waypoint_radius: float = 3.0,
+        eval_center_bias: float = 0.0,
+    ) -> None:
+        if mode not in _MODES:
+            raise ConfigError(f"ConditioningSampler mode must be one of {_MODES}, got {mode!r}")
+        self.mode = mode
+        self.waypoint_radius = _check_range("waypoint_radius", waypoint_radius)
+        self.collision = _check_range("collision", collision)
+        self.offroad = _check_range("offroad", offroad)
+        self.red_light = _check_range("red_light", red_light)
+        self.comfort = _check_range("comfort", comfort)
+        self.center_low = _check_range("center_low", center_low)
+        self.center_high = _check_range("center_high", center_high)
+        self.center_bias = _check_range("center_bias", center_bias)
+        self.align_low = _check_range("align_low", align_low)
+        self.align_high = _check_range("align_high", align_high)
+        for name, p in (("center_low_prob", center_low_prob), ("align_low_prob", align_low_prob)):
+            if not 0.0 <= float(p) <= 1.0:
+                raise ConfigError(f"{name} must lie in [0, 1], got {p}")
+        self.center_low_prob = float(center_low_prob)
+        self.align_low_prob = float(align_low_prob)
+        if not (np.isfinite(eval_waypoint_radius) and eval_waypoint_radius > 0):
+            raise ConfigError(
+                f"eval_waypoint_radius must be a positive number [m], got {eval_waypoint_radius}"
+            )
+        self.eval_waypoint_radius = float(eval_waypoint_radius)
+        self.eval_center_bias = float(eval_center_bias)
+
+    def eval_vector(self) -> np.ndarray:
+        """(len(COEFF_NAMES),) float32: the fixed evaluation coefficients (paper section 5)."""
+        values = {
+            "waypoint_radius": self.eval_waypoint_radius,
+            "collision": self.collision[1],
+            "offroad": self.offroad[1],
+            "red_light": self.red_light[1],
+            "comfort": self.comfort[1],
+            "center": max(self.center_low[1], self.center_high[1]),
+            "center_bias": self.eval_center_bias,
+            "align": max(self.align_low[1], self.align_high[1]),
+        }
+        return np.array([values[name] for name in COEFF_NAMES], dtype=np.float32)
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Coefficients for `n` agents.
+
+        Args:
+            rng: Seeded generator; the draws are consumed in `COEFF_NAMES` order.
+            n: Number of agents.
+
+        Returns:
+            (n, len(COEFF_NAMES)) float32.
+        """
+        if self.mode == "eval":
+            return np.tile(self.eval_vector(), (n, 1))
+        # one (n, 10) draw: one column per coefficient plus the two mode choices, in this order
+        u = rng.random((n, len(COEFF_NAMES) + 2))
+        lo, span = self._lo_span(u[:, -2] < self.center_low_prob, u[:, -1] < self.align_low_prob)
+        return (lo + span * u[:, : len(COEFF_NAMES)]).astype(np.float32)
+
+    def _lo_span(self, center_low: np.ndarray, align_low: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, C) lower bounds and widths of each agent's uniform ranges (bimodal per agent)."""
+        ranges = {
+            "waypoint_radius": self.waypoint_radius,
+            "collision": self.collision,
+            "offroad": self.offroad,
+            "red_light": self.red_light,
+            "comfort": self.comfort,
+            "center": self.center_high,
+            "center_bias": self.center_bias,
+            "align": self.align_high,
+        }
+        lo = np.array([ranges[k][0] for k in COEFF_NAMES])
+        hi = np.array([ranges[k][1] for k in COEFF_NAMES])
+        lo = np.broadcast_to(lo, (len(center_low), len(lo))).copy()
+        hi = np.broadcast_to(hi, lo.shape).copy()
+        c, a = COEFF_NAMES.index("center"), COEFF_NAMES.index("align")
+        lo[center_low, c], hi[center_low, c] = self.center_low
+        lo[align_low, a], hi[align_low, a] = self.align_low
+        return lo, hi - lo
+
+
+class HiddenParamSampler:
+    """Samples the hidden per-agent dynamics parameters in `HIDDEN_PARAMS` order (section 2.6).
+
+    Args:
+        friction: Tyre-road friction coefficient mu, U(low, high).
+        accel_gain: Multiplier on the acceleration action, U(low, high).
+        steer_gain: Multiplier on the steering action, U(low, high).
+
+    Raises:
+        ConfigError: On a malformed range or a non-positive friction.
+    """
+
+    def __init__(
+        self,
+        friction: Range = (0.7, 1.3),
+        accel_gain: Range = (0.9, 1.1),
+        steer_gain: Range = (0.9, 1.1),
+    ) -> None:
+        self.friction = _check_range("friction", friction)
+        self.accel_gain = _check_range("accel_gain", accel_gain)
+        self.steer_gain = _check_range("steer_gain", steer_gain)
+        if self.friction[0] <= 0:
+            raise ConfigError(f"friction must be positive, got range {self.friction}")
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """(n, len(HIDDEN_PARAMS)) float32 friction, accel gain, steer gain."""
+        ranges = {"friction": self.friction, "accel_gain": self.accel_gain, "steer_gain": self.steer_gain}
+        lo = np.array([ranges[k][0] for k in HIDDEN_PARAMS])
+        hi = np.array([ranges[k][1] for k in HIDDEN_PARAMS])
+        return (lo + (hi - lo) * rng.random((n, len(HIDDEN_PARAMS)))).astype(np.float32)

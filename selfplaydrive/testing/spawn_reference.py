@@ -1,0 +1,206 @@
+"""NumPy references of the spawner kernels in `selfplaydrive/_sim/spawn.pyx` (paper section 2.2).
+
+Each function states the same rule as its kernel with plain vectorised NumPy; the tests
+(tests/maps/test_routing.py, tests/scenario/test_index_parts.py) check that kernel and reference
+give identical results for the same inputs and random draws.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH, RouteBatch, RouteTables, _empty_batch
+from selfplaydrive.scenario.index import Chunks, MapIndex
+from selfplaydrive.scenario.placement import Poses
+
+
+def lane_points_reference(t: RouteTables, lane: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy reference of `RouteTables.points` / kernel `lane_points`: (n, 2) xy [m], (n,) heading [rad]."""
+    lane = np.asarray(lane, dtype=np.int64)
+    length = t.length[lane]
+    g = t.base[lane] + np.minimum(np.maximum(s, 0.0), length)
+    # one binary search, then linear interpolation inside the found piece of the centreline
+    seg = np.searchsorted(t.gcum, g, side="right") - 1
+    seg = np.minimum(np.maximum(seg, t.offsets[lane]), t.offsets[lane + 1] - 2)
+    g0, g1 = t.gcum[seg], t.gcum[seg + 1]
+    f = (g - g0) / (g1 - g0)
+    x = t.px[seg] + f * (t.px[seg + 1] - t.px[seg])
+    y = t.py[seg] + f * (t.py[seg + 1] - t.py[seg])
+    xy = np.stack([x, y], axis=1)
+    return xy, t.heading[seg]
+
+
+def hash_uniforms(key: int, agents: int, draws: int) -> np.ndarray:
+    """(agents, draws) float64 counter-based uniforms in [0, 1): splitmix64 of
+    key ^ (agent << 40) ^ draw. The NumPy twin of the kernels' `hash_uniform`, so route walks
+    need no pre-drawn random array and stay reproducible from one key."""
+    with np.errstate(over="ignore"):
+        a = np.arange(agents, dtype=np.uint64)[:, None] << np.uint64(40)
+        z = np.uint64(key) ^ a ^ np.arange(draws, dtype=np.uint64)[None, :]
+        z = z + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+
+
+def sample_routes_reference(
+    tables: RouteTables,
+    start_lane: np.ndarray,
+    start_s: np.ndarray,
+    horizon_s: np.ndarray,
+    key: int,
+    lane_change_prob: float = 0.1,
+    max_pieces: int = 128,
+) -> RouteBatch:
+    """NumPy reference of the route-walk kernel for the same random `key`; the tests check that
+    both give identical routes. Vectorised over the agents still walking."""
+    a, n = len(start_lane), max_pieces
+    u = hash_uniforms(key, a, 3 * n).reshape(a, n, 3)
+    out = _empty_batch(a, n)
+    idx = np.arange(a)
+    cur = np.asarray(start_lane, dtype=np.int64).copy()
+    s_in = np.clip(np.asarray(start_s, dtype=np.float64), 0.0, tables.length[cur])
+    t_acc = np.zeros(a)
+    horizon = np.asarray(horizon_s, dtype=np.float64)
+    prev = np.zeros(a, dtype=bool)
+    changes = lane_change_prob > 0 and tables.has_changes
+    for step in range(n):
+        if len(idx) == 0:
+            break
+        uu = u[idx, step]
+        length = tables.length[cur]
+        target = _change_target(tables, cur, uu[:, 1]) if changes else np.full(len(idx), -1)
+        lc = (uu[:, 0] < lane_change_prob) & (target >= 0) & ~prev & (length - s_in >= MIN_CHANGE_LENGTH)
+        lc &= changes
+        end = np.where(lc, 0.5 * (length + s_in), length)
+        out.lanes[idx, step], out.s_start[idx, step], out.s_end[idx, step] = cur, s_in, end
+        out.change[idx, step] = lc
+        t_acc = t_acc + (end - s_in) / tables.speed[cur]
+        out.t_end[idx, step] = t_acc
+        nxt = np.where(lc, target, _pick(uu[:, 2], tables.succ_offsets, tables.succ_index, cur))
+        s_next = np.where(lc, end * tables.length[np.maximum(nxt, 0)] / length, 0.0)
+        out.dead_end[idx[nxt < 0]] = True
+        go = (nxt >= 0) & (t_acc < horizon)
+        out.t_end[idx[~go], step + 1 :] = t_acc[~go, None]
+        idx, cur, s_in, t_acc, horizon, prev = idx[go], nxt[go], s_next[go], t_acc[go], horizon[go], lc[go]
+    return out
+
+
+def _pick(rng_u: np.ndarray, offsets: np.ndarray, index: np.ndarray, lane: np.ndarray) -> np.ndarray:
+    """Uniform choice among the successors of `lane`; -1 where there is none (dead end)."""
+    deg = offsets[lane + 1] - offsets[lane]
+    k = np.minimum((rng_u * deg).astype(np.int64), np.maximum(deg - 1, 0))
+    out = np.full(len(lane), -1, dtype=np.int64)
+    has = deg > 0
+    out[has] = index[offsets[lane[has]] + k[has]]
+    return out
+
+
+def _change_target(t: RouteTables, lane: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Legal lane-change target (left or right, chosen by u when both exist) or -1."""
+    left, right = t.change_left[lane], t.change_right[lane]
+    both = (left >= 0) & (right >= 0)
+    return np.where(both, np.where(u < 0.5, left, right), np.maximum(left, right))
+
+
+def batch_waypoints_reference(
+    tables: RouteTables, routes: RouteBatch, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy reference of `batch_waypoints` (identical results; used by the tests)."""
+    a, k = times.shape
+    total = routes.t_end[:, -1]
+    count = np.maximum((times <= total[:, None]).sum(axis=1), 1)
+    t = np.minimum(times, total[:, None])  # clamp: the fallback waypoint sits at the route end
+    idx = np.minimum((routes.t_end[:, None, :] < t[:, :, None]).sum(axis=2), routes.t_end.shape[1] - 1)
+    rows = np.arange(a)[:, None]
+    lane = routes.lanes[rows, idx]
+    t_before = np.where(idx > 0, routes.t_end[rows, np.maximum(idx - 1, 0)], 0.0)
+    lane_safe = np.maximum(lane, 0)
+    s = routes.s_start[rows, idx] + (t - t_before) * tables.speed[lane_safe]
+    s = np.minimum(s, routes.s_end[rows, idx])
+    xy, _ = lane_points_reference(tables, lane_safe.ravel(), s.ravel())
+    xy = xy.reshape(a, k, 2)
+    pad = np.arange(k)[None, :] >= count[:, None]
+    last = xy[np.arange(a), count - 1]
+    xy = np.where(pad[:, :, None], last[:, None, :], xy)
+    return xy.astype(np.float32), count.astype(np.int32)
+
+
+def sample_on_chunks_reference(
+    index: MapIndex, chunks: Chunks, box: np.ndarray, rng: np.random.Generator, n: int
+) -> Poses:
+    """NumPy reference of `sample_on_chunks` (same draws, same poses; used by the tests)."""
+    u = rng.random((max(n, 0), 2)).T
+    ids = chunks.cells.query_box(box)
+    if len(ids) == 0 or n <= 0:
+        z = np.zeros(0, dtype=np.int64)
+        return Poses(z, np.zeros(0), np.zeros((0, 2)), np.zeros(0), z)
+    length = chunks.s1[ids] - chunks.s0[ids]
+    cdf = np.cumsum(length)
+    pick = ids[np.minimum(np.searchsorted(cdf, u[0] * cdf[-1], side="right"), len(ids) - 1)]
+    s = chunks.s0[pick] + u[1] * (chunks.s1[pick] - chunks.s0[pick])
+    lane = chunks.lane[pick]
+    xy, heading = lane_points_reference(index.routes, lane, s)
+    inside = (xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2]) & (xy[:, 1] >= box[1]) & (xy[:, 1] <= box[3])
+    return Poses(lane, s, xy, heading, pick).take(np.flatnonzero(inside))
+
+
+def _sq_dist(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    dx = p[:, None, 0] - q[None, :, 0]
+    dy = p[:, None, 1] - q[None, :, 1]
+    return dx * dx + dy * dy
+
+
+def greedy_separated_reference(
+    xy: np.ndarray,
+    radius: np.ndarray,
+    need: int,
+    fixed_xy: np.ndarray | None = None,
+    fixed_radius: np.ndarray | None = None,
+    gap: float = 0.0,
+    batch: int = 128,
+) -> np.ndarray:
+    """Greedy selection of candidates that keep apart from each other and from fixed objects.
+
+    Candidates i and j are compatible when |xy_i - xy_j| >= radius_i + radius_j + gap; a
+    candidate and fixed object k likewise with fixed_radius_k. With radius = min_distance / 2
+    and gap = 0 this is the paper's "at least 15 m between any two vehicles". Candidates are
+    tried in order, `batch` at a time (one pairwise matrix per batch), so the work is bounded
+    by the number of candidates.
+
+    Args:
+        xy: (n, 2) candidate centres [m] in the order they are tried.
+        radius: (n,) candidate radii [m].
+        need: Stop after this many accepted.
+        fixed_xy: (k, 2) centres of already placed objects [m].
+        fixed_radius: (k,) their radii [m].
+        gap: Extra clearance [m].
+        batch: Candidates per pairwise matrix.
+
+    Returns:
+        (m,) int64 accepted candidate indices, m <= need, in acceptance order.
+    """
+    acc_xy = np.zeros((0, 2)) if fixed_xy is None else np.asarray(fixed_xy, dtype=np.float64).reshape(-1, 2)
+    acc_r = np.zeros(0) if fixed_radius is None else np.asarray(fixed_radius, dtype=np.float64)
+    accepted: list[int] = []
+    for start in range(0, len(xy), batch):
+        if len(accepted) >= need:
+            break
+        p, r = xy[start : start + batch], radius[start : start + batch]
+        blocked = np.zeros(len(p), dtype=bool)
+        if len(acc_xy):
+            blocked |= np.any(_sq_dist(p, acc_xy) < (r[:, None] + acc_r[None, :] + gap) ** 2, axis=1)
+        conflict = _sq_dist(p, p) < (r[:, None] + r[None, :] + gap) ** 2
+        new: list[int] = []
+        for i in np.flatnonzero(~blocked).tolist():
+            if blocked[i]:
+                continue
+            new.append(i)
+            if len(accepted) + len(new) >= need:
+                break
+            blocked |= conflict[i]
+        accepted.extend(start + i for i in new)
+        acc_xy = np.concatenate([acc_xy, p[new]])
+        acc_r = np.concatenate([acc_r, r[new]])
+    return np.asarray(accepted, dtype=np.int64)

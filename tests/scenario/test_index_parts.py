@@ -1,0 +1,231 @@
+"""Per-map index, placement helpers, vehicle sizes, lights and pedestrians of the spawner."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.scenario.index import CellIndex, MapIndex, map_index
+from selfplaydrive.scenario.lights import LightSampler
+from selfplaydrive.scenario.pedestrians import PedestrianSampler
+from selfplaydrive.scenario.placement import (
+    greedy_separated,
+    roadside_offset,
+    sample_on_chunks,
+    sample_region,
+)
+from selfplaydrive.scenario.spawner import PaperSpawner
+from selfplaydrive.scenario.vehicles import DEFAULT_CATEGORIES, VehicleSizeSampler
+from selfplaydrive.testing.spawn_reference import greedy_separated_reference, sample_on_chunks_reference
+
+
+@pytest.fixture(scope="module")
+def scenarios_small(grid_map):
+    sp = PaperSpawner(pedestrians=PedestrianSampler(count=(8, 8)))
+    rng = np.random.default_rng(3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return [sp.sample(grid_map, rng) for _ in range(60)]
+
+
+def test_cell_index_box_query_matches_brute_force():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-300, 300, (5000, 2))
+    cells = CellIndex.build(xy, 25.0)
+    for _ in range(20):
+        c = rng.uniform(-350, 350, 2)
+        box = np.array([c[0] - 100, c[1] - 100, c[0] + 100, c[1] + 100])
+        got = np.sort(cells.query_box(box))
+        inside = (xy[:, 0] >= box[0]) & (xy[:, 0] <= box[2]) & (xy[:, 1] >= box[1]) & (xy[:, 1] <= box[3])
+        np.testing.assert_array_equal(got, np.flatnonzero(inside))
+
+
+def test_roadside_on_straight_map(straight_map):
+    idx = MapIndex.build(straight_map)
+    # both lanes are rightmost; kerbs 1.75 m right of each centreline (straight_map fixture)
+    assert set(idx.roadside.lane.tolist()) == {0, 1}
+    np.testing.assert_allclose(idx.roadside.edge, 1.75, atol=1e-4)
+    assert (idx.roadside.s1 - idx.roadside.s0).sum() == pytest.approx(400.0, rel=1e-5)
+    assert idx.spawn.s1.max() <= 200.0 + 1e-4
+    # the whole 200 m map fits in one region: at least the best centres are kept
+    assert len(idx.centres) >= 1
+
+
+def test_crossings_span_the_road(grid_map):
+    idx = map_index(grid_map)
+    length = np.hypot(*(idx.crossings.end - idx.crossings.start).T)
+    np.testing.assert_allclose(length, 7.0, atol=1e-3)  # two 3.5 m lanes, kerb to kerb
+    # crosswalks: 7 m across the road (2 lanes), 3 m wide -> half width 1.5 - 0.3
+    cw_len = np.hypot(*(idx.crosswalks.end - idx.crosswalks.start).T)
+    np.testing.assert_allclose(cw_len, 7.0, atol=1e-3)
+    np.testing.assert_allclose(idx.crosswalks.half_width, 1.2, atol=1e-6)
+    assert len(idx.crosswalks.start) == len(grid_map.crosswalks)
+
+
+def test_region_centres_have_enough_lane(grid_map):
+    idx = MapIndex.build(grid_map, min_region_lane_length=1000.0)
+    assert np.all(idx.centre_lane_length >= 1000.0)
+    small = MapIndex.build(grid_map, min_region_lane_length=1e9)  # none qualifies: best half kept
+    assert len(small.centres) >= 1
+    assert np.all(small.centre_lane_length >= 0.5 * small.centre_lane_length.max())
+
+
+def test_map_index_is_cached(grid_map):
+    assert map_index(grid_map) is map_index(grid_map)
+    assert map_index(grid_map, region_stride=10.0) is not map_index(grid_map)
+
+
+def test_sample_on_chunks_kernel_matches_reference(grid_map):
+    idx = map_index(grid_map)
+    for seed in range(20):
+        box = sample_region(idx, np.random.default_rng(seed))
+        for chunks in (idx.spawn, idx.roadside):
+            a = sample_on_chunks(idx, chunks, box, np.random.default_rng(seed), 200)
+            b = sample_on_chunks_reference(idx, chunks, box, np.random.default_rng(seed), 200)
+            for f in ("lane", "s", "xy", "heading", "chunk"):
+                np.testing.assert_allclose(getattr(a, f), getattr(b, f), atol=1e-9, err_msg=f)
+    empty = sample_on_chunks(
+        idx, idx.spawn, np.array([1e5, 1e5, 1e5 + 1, 1e5 + 1]), np.random.default_rng(0), 50
+    )
+    assert len(empty.lane) == 0
+
+
+def test_greedy_kernel_matches_reference_and_keeps_spacing():
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        xy = rng.uniform(0, 120, (400, 2))
+        r = rng.uniform(1.0, 8.0, 400)
+        fixed = rng.uniform(0, 120, (6, 2))
+        fr = np.full(6, 3.0)
+        a = greedy_separated(xy, r, 40, fixed, fr, gap=0.5)
+        b = greedy_separated_reference(xy, r, 40, fixed, fr, gap=0.5)
+        np.testing.assert_array_equal(a, b)
+        d = np.hypot(*(xy[a][:, None] - xy[a][None]).transpose(2, 0, 1))
+        lim = r[a][:, None] + r[a][None] + 0.5
+        np.fill_diagonal(d, np.inf)
+        assert np.all(d >= lim)
+    assert len(greedy_separated(xy, r, 0)) == 0
+
+
+def test_roadside_offset_hand_computed():
+    # kerb 1.75 m from the centreline, 0.3 m gap, car 1.8 m wide: centre 0.55 m right of centre
+    off = roadside_offset(
+        np.array([3.5, 3.5, 3.5]), np.array([1.75, 4.0, 1.75]), np.array([1.8, 1.8, 3.4]), 0.3, 1.0
+    )
+    # shoulder: right side at most 1.75 + 1.0 -> 2.75 - 0.9; a very wide vehicle never goes left of centre
+    np.testing.assert_allclose(off, [0.55, 1.85, 0.0])
+
+
+def test_vehicle_size_mix():
+    s = VehicleSizeSampler()
+    length, width, cat = s.sample(np.random.default_rng(0), 200_000)
+    shares = np.bincount(cat, minlength=len(DEFAULT_CATEGORIES)) / len(cat)
+    np.testing.assert_allclose(shares, [c[3] for c in DEFAULT_CATEGORIES], atol=0.005)
+    assert length.min() >= 1.8 * 0.95 - 1e-9 and length.max() <= 12.0 * 1.05 + 1e-9
+    assert width.min() >= 0.6 * 0.95 - 1e-9 and width.max() <= 2.55 + 1e-9
+    bikes = cat == 0
+    assert length[bikes].mean() == pytest.approx(1.8, rel=0.01) and width[bikes].mean() == pytest.approx(
+        0.6, rel=0.01
+    )
+    with pytest.raises(ConfigError, match="each vehicle category"):
+        VehicleSizeSampler(categories=[("car", 4.5, -1.0, 1.0)])
+    with pytest.raises(ConfigError, match="jitter"):
+        VehicleSizeSampler(jitter=0.9)
+
+
+def test_light_sampler():
+    s = LightSampler()
+    rng = np.random.default_rng(0)
+    draws = [s.sample(rng, 5, 30.0) for _ in range(4000)]
+    assert np.mean([d[0] for d in draws]) == pytest.approx(0.5, abs=0.03)
+    on = np.concatenate([d[1] for d in draws if d[0]])
+    np.testing.assert_allclose(np.bincount(on, minlength=4) / len(on), 0.25, atol=0.02)
+    off = [d for d in draws if not d[0]]
+    assert all(np.all(d[1] == 0) and np.all(d[2] == 30.0) for d in off)
+    assert LightSampler(all_off_prob=0.0).sample(rng, 0, 20.0)[1].shape == (0,)
+    with pytest.raises(ConfigError, match="state_probs"):
+        LightSampler(state_probs=(0.5, 0.5))
+    with pytest.raises(ConfigError, match="time_left"):
+        LightSampler(time_left=(0.0, 10.0))
+
+
+def test_pedestrians_keep_clear_of_vehicles(grid_map):
+    idx = map_index(grid_map)
+    sampler = PedestrianSampler(count=(8, 8), crosswalk_share=1.0)
+    box = np.array([-100.0, -100.0, 100.0, 100.0])
+    peds = sampler.sample(
+        np.random.default_rng(0), idx.crossings, idx.crosswalks, box, 8, np.zeros((0, 2)), np.zeros(0)
+    )
+    assert peds.valid.sum() == 8
+    # every crossing starts at a crosswalk: its middle point lies on a crosswalk axis
+    mids = (peds.path[:, 1] + peds.path[:, 2]) / 2
+    cw_mid = (idx.crosswalks.start + idx.crosswalks.end) / 2
+    assert np.all(np.min(np.hypot(*(mids[:, None] - cw_mid[None]).transpose(2, 0, 1)), axis=1) <= 1.2 + 1e-3)
+    # a vehicle parked on every start point removes those pedestrians
+    blocked = sampler.sample(
+        np.random.default_rng(0),
+        idx.crossings,
+        idx.crosswalks,
+        box,
+        8,
+        peds.path[:, 0].astype(np.float64),
+        np.full(8, 2.0),
+    )
+    assert blocked.valid.sum() == 0
+    with pytest.raises(ConfigError, match="speed"):
+        PedestrianSampler(speed=(0.0, 1.0))
+
+
+def test_no_roadside_spots_near_crosswalks_or_junction_mouths(grid_map):
+    idx = map_index(grid_map)
+    t = idx.routes
+    lanes = grid_map.lanes
+    for end in ("s0", "s1"):
+        s = getattr(idx.roadside, end)
+        xy, _ = t.points(idx.roadside.lane, s)
+        cw_mid = (idx.crosswalks.start + idx.crosswalks.end) / 2
+        d = np.min(np.hypot(*(xy[:, None] - cw_mid[None]).transpose(2, 0, 1)), axis=1)
+        assert d.min() >= 5.0 + 1.5 - 1e-6  # 5 m clearance from a 3 m wide crosswalk
+    # every grid road lane starts and ends at a junction or the map border: 5 m kept free
+    at_junction_end = np.array([any(lanes.in_junction[lanes.successors(int(i))]) for i in idx.roadside.lane])
+    room = t.length[idx.roadside.lane] - idx.roadside.s1
+    assert np.all(room[at_junction_end] >= 5.0 - 1e-6)
+
+
+def test_pedestrian_paths_avoid_stationary_vehicles(grid_map):
+    idx = map_index(grid_map)
+    sampler = PedestrianSampler(count=(8, 8), crosswalk_share=0.0)
+    box = np.array([-100.0, -100.0, 100.0, 100.0])
+    free = sampler.sample(
+        np.random.default_rng(1), idx.crossings, idx.crosswalks, box, 8, np.zeros((0, 2)), np.zeros(0)
+    )
+    assert free.valid.sum() == 8
+    # a vehicle in the middle of each crossing: stationary blocks the path, moving does not
+    mid = ((free.path[:, 1] + free.path[:, 2]) / 2).astype(np.float64)
+    args = (idx.crossings, idx.crosswalks, box, 8, mid, np.full(8, 1.0))
+    moving = sampler.sample(np.random.default_rng(1), *args, np.zeros(8, dtype=bool))
+    assert moving.valid.sum() == 8
+    still = sampler.sample(np.random.default_rng(1), *args, np.ones(8, dtype=bool))
+    assert still.valid.sum() == 0
+
+
+def test_scenario_pedestrians_never_walk_through_parked_or_static(scenarios_small):
+    for s in scenarios_small:
+        still_xy = np.concatenate([s.agent_xy[s.agent_parked], s.static_xy[s.static_valid]]).astype(
+            np.float64
+        )
+        still_r = np.concatenate(
+            [
+                0.5 * np.hypot(s.agent_length, s.agent_width)[s.agent_parked],
+                0.5 * np.hypot(s.static_length, s.static_width)[s.static_valid],
+            ]
+        )
+        for p in s.ped_path[s.ped_valid].astype(np.float64):
+            for a, b in ((p[0], p[1]), (p[1], p[2])):
+                d = b - a
+                t = np.clip(((still_xy - a) @ d) / max(d @ d, 1e-12), 0, 1)
+                dist = np.hypot(*(still_xy - (a + t[:, None] * d)).T)
+                assert np.all(dist >= still_r + 1.0 - 1e-3)
