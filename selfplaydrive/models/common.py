@@ -1,0 +1,307 @@
+"""Pieces shared by the policy models (paper section 3).
+
+- `ObsSplitter`: cuts a flat (B, obs_dim) observation into per-modality tensors using the
+  env's `ObsLayout`, so no model hard-codes column offsets.
+- `masked_max`: the Deep Sets pooling with padded elements excluded.
+- `compact_sets`: drops slots that are padding in every row of a batch (exact, a speed-up).
+- MultiDiscrete helpers: split logits, sample, log-probability and entropy summed over the
+  action dimensions (acceleration x steering by default, section 2.4).
+- `check_nvec`, `mlp`: argument checking and small builders.
+
+Every model returns, for a batch of B observations, concatenated logits (B, sum(nvec)), a
+value (B,) and a recurrent state: a tuple of tensors (empty for feed-forward models).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import fields
+from itertools import pairwise
+from typing import Protocol, runtime_checkable
+
+import torch
+from torch import Tensor, nn
+
+from selfplaydrive.maps.roadmap import SegmentType
+from selfplaydrive.sim.layout import EGO_FEATURES, ObsLayout
+
+State = tuple[Tensor, ...]
+
+COEF_PREFIX = "coef_"
+NUM_ROAD_TYPES = len(SegmentType)
+
+
+@runtime_checkable
+class PolicyModel(Protocol):
+    """What a trainer needs from a policy (both `DeepSetsModel` and `TransformerModel`)."""
+
+    nvec: tuple[int, ...]
+    is_recurrent: bool
+
+    def initial_state(self, batch_size: int, device: torch.device | str | None = None) -> State:
+        """State for a fresh batch of agents (an empty tuple for feed-forward models)."""
+        ...
+
+    def forward(self, obs: Tensor, state: State, episode_start: Tensor) -> tuple[Tensor, Tensor, State]:
+        """(B, obs_dim), state, (B,) bool -> logits (B, sum(nvec)), value (B,), new state."""
+        ...
+
+    def forward_sequence(
+        self, obs: Tensor, state: State, episode_start: Tensor
+    ) -> tuple[Tensor, Tensor, State]:
+        """(T, B, obs_dim), state, (T, B) bool -> logits (T, B, sum(nvec)), values (T, B), state."""
+        ...
+
+
+def check_nvec(action_nvec: Sequence[int]) -> tuple[int, ...]:
+    """Validate MultiDiscrete sizes.
+
+    Args:
+        action_nvec: Number of choices per action dimension, e.g. (7, 13).
+
+    Returns:
+        The sizes as a tuple of ints.
+
+    Raises:
+        ValueError: When empty or a size is below 1.
+    """
+    nvec = tuple(int(n) for n in action_nvec)
+    if not nvec or any(n < 1 for n in nvec):
+        raise ValueError(
+            f"action_nvec: expected a non-empty sequence of ints >= 1, got {list(action_nvec)!r}"
+        )
+    return nvec
+
+
+def check_positive(name: str, value: int) -> int:
+    """Raise a ValueError naming `name` unless `value` is an int >= 1."""
+    if int(value) != value or value < 1:
+        raise ValueError(f"{name}: expected an int >= 1, got {value!r}")
+    return int(value)
+
+
+def mlp(
+    sizes: Sequence[int], activation: type[nn.Module] = nn.ReLU, final_act: bool = False
+) -> nn.Sequential:
+    """Linear layers of the given widths with `activation` between them.
+
+    Args:
+        sizes: [in, hidden..., out] widths.
+        activation: Module class inserted after every layer but the last.
+        final_act: Also apply the activation after the last layer.
+    """
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(pairwise(sizes)):
+        layers.append(nn.Linear(a, b))
+        if i < len(sizes) - 2 or final_act:
+            layers.append(activation())
+    return nn.Sequential(*layers)
+
+
+def as_layout(layout: ObsLayout | Mapping[str, int]) -> ObsLayout:
+    """Accept an `ObsLayout` or its fields as a mapping (Hydra's `_convert_="all"` turns the
+    dataclass into a dict on its way to the constructor)."""
+    if isinstance(layout, ObsLayout):
+        return layout
+    if isinstance(layout, Mapping):
+        names = [f.name for f in fields(ObsLayout)]
+        unknown = sorted(set(layout) - set(names))
+        if unknown:
+            raise ValueError(f"layout: unknown keys {unknown}, expected a subset of {names}")
+        return ObsLayout(**layout)
+    raise TypeError(f"layout: expected an ObsLayout or a mapping of its fields, got {type(layout).__name__}")
+
+
+class ObsSplitter(nn.Module):
+    """Layout-driven split of flat observations into model inputs (paper section 2.5).
+
+    Outputs of `forward(obs)`:
+        ego: (B, ego_dim + extra_dim) ego features followed by the hook columns.
+        coef: (B, C) the reward coefficients (ego features named `coef_*`, section 2.3).
+        objects: (B, O, F_obj) object features; road: (B, R, F_road') road features with the
+            segment `type` column replaced by a one-hot over `SegmentType` (as PufferDrive does).
+        object_valid: (B, O) bool; road_valid: (B, R) bool.
+
+    Args:
+        layout: The env's observation layout.
+        one_hot_road_type: Replace the scalar road `type` by a one-hot of `NUM_ROAD_TYPES`.
+    """
+
+    def __init__(self, layout: ObsLayout | Mapping[str, int], one_hot_road_type: bool = True) -> None:
+        super().__init__()
+        self.layout = layout = as_layout(layout)
+        self.one_hot_road_type = one_hot_road_type
+        coef = [i for i, name in enumerate(EGO_FEATURES) if name.startswith(COEF_PREFIX)]
+        self.register_buffer("coef_index", torch.tensor(coef, dtype=torch.long), persistent=False)
+        self.obj_valid_col = layout.feature_index("object", "valid")
+        self.road_valid_col = layout.feature_index("road", "valid")
+        self.road_type_col = layout.feature_index("road", "type")
+        self.register_buffer("type_codes", torch.arange(NUM_ROAD_TYPES), persistent=False)
+
+    @property
+    def ego_in(self) -> int:
+        """Width of the `ego` output: ego features plus hook columns."""
+        return self.layout.ego_dim + self.layout.extra_dim
+
+    @property
+    def coef_in(self) -> int:
+        """Number of reward-coefficient columns."""
+        return int(self.coef_index.numel())
+
+    @property
+    def object_in(self) -> int:
+        return self.layout.object_dim
+
+    @property
+    def road_in(self) -> int:
+        return self.layout.road_dim - 1 + NUM_ROAD_TYPES if self.one_hot_road_type else self.layout.road_dim
+
+    def forward(self, obs: Tensor) -> dict[str, Tensor]:
+        lay = self.layout
+        if obs.dim() != 2 or obs.shape[1] != lay.obs_dim:
+            raise ValueError(f"obs: expected shape (B, {lay.obs_dim}) for {lay}, got {tuple(obs.shape)}")
+        if not obs.is_floating_point():
+            raise ValueError(f"obs: expected a floating-point tensor (float32), got {obs.dtype}")
+        b = obs.shape[0]
+        ego = obs[:, : lay.ego_dim]
+        objects = obs[:, lay.objects_offset : lay.road_offset].reshape(b, lay.max_objects, lay.object_dim)
+        road = obs[:, lay.road_offset : lay.extra_offset].reshape(b, lay.max_road, lay.road_dim)
+        extra = obs[:, lay.extra_offset :]
+        out = {
+            "ego": torch.cat([ego, extra], dim=1) if lay.extra_dim else ego,
+            "coef": ego.index_select(1, self.coef_index),
+            "objects": objects,
+            "object_valid": objects[..., self.obj_valid_col] > 0.5,
+            "road": self._road_features(road),
+            "road_valid": road[..., self.road_valid_col] > 0.5,
+        }
+        return out
+
+    def _road_features(self, road: Tensor) -> Tensor:
+        if not self.one_hot_road_type:
+            return road
+        col = self.road_type_col
+        # The kernel writes type / (NUM_ROAD_TYPES - 1); round back to the class index.
+        idx = torch.round(road[..., col] * (NUM_ROAD_TYPES - 1)).long().clamp(0, NUM_ROAD_TYPES - 1)
+        one_hot = (idx.unsqueeze(-1) == self.type_codes).to(road.dtype)
+        return torch.cat([road[..., :col], road[..., col + 1 :], one_hot], dim=-1)
+
+
+def compact_sets(x: Tensor, valid: Tensor) -> tuple[Tensor, Tensor]:
+    """Keep only as many slots as the fullest row has valid elements.
+
+    Valid elements are moved to the front (stable order) and trailing all-padding slots are
+    dropped. Both models are invariant to element order and ignore padding, so their outputs
+    are unchanged; the cost of the set encoders and of attention drops with the slot count.
+
+    Args:
+        x: (B, N, F) element features.
+        valid: (B, N) bool.
+
+    Returns:
+        (B, K, F) features and (B, K) validity, K = max valid count (at least 1).
+    """
+    k = max(int(valid.sum(dim=1).max().item()) if valid.numel() else 0, 1)
+    if k >= valid.shape[1]:
+        return x, valid
+    order = torch.argsort(valid.to(torch.int8), dim=1, descending=True, stable=True)[:, :k]
+    x = torch.gather(x, 1, order.unsqueeze(-1).expand(-1, -1, x.shape[-1]))
+    return x, torch.gather(valid, 1, order)
+
+
+def masked_max(x: Tensor, valid: Tensor) -> Tensor:
+    """Element-wise maximum over a set, ignoring padded elements (Deep Sets, section 3).
+
+    Args:
+        x: (B, N, D) per-element embeddings.
+        valid: (B, N) bool, False for padding.
+
+    Returns:
+        (B, D) maximum over valid elements; zeros for a row without any valid element.
+    """
+    # One fused pass (torch.where with a scalar) rather than masked_fill's copy + fill.
+    pooled = torch.where(valid.unsqueeze(-1), x, torch.finfo(x.dtype).min).amax(dim=1)
+    return torch.where(valid.any(dim=1, keepdim=True), pooled, torch.zeros_like(pooled))
+
+
+def reset_state(state: State, episode_start: Tensor) -> State:
+    """Zero the recurrent state of agents whose episode starts.
+
+    Args:
+        state: Tensors of shape (B, ...).
+        episode_start: (B,) bool.
+    """
+    batch = state[0].shape[0] if state else episode_start.shape[0]
+    if episode_start.shape != (batch,):
+        raise ValueError(f"episode_start: expected shape ({batch},), got {tuple(episode_start.shape)}")
+    keep = ~episode_start.to(torch.bool)
+    return tuple(torch.where(keep.view(-1, *([1] * (s.dim() - 1))), s, torch.zeros_like(s)) for s in state)
+
+
+# ---------------------------------------------------------------------------------------------
+# MultiDiscrete action distribution (section 2.4): independent categoricals, one per dimension.
+
+
+def split_logits(logits: Tensor, nvec: Sequence[int]) -> list[Tensor]:
+    """Split (..., sum(nvec)) logits into one (..., n_i) tensor per action dimension."""
+    if logits.shape[-1] != sum(nvec):
+        raise ValueError(f"logits: expected last dimension sum(nvec) = {sum(nvec)}, got {logits.shape[-1]}")
+    return list(torch.split(logits, list(nvec), dim=-1))
+
+
+def sample_actions(
+    logits: Tensor, nvec: Sequence[int], deterministic: bool = False, generator: torch.Generator | None = None
+) -> Tensor:
+    """Draw MultiDiscrete actions.
+
+    Args:
+        logits: (..., sum(nvec)) unnormalised log-probabilities.
+        nvec: Choices per action dimension.
+        deterministic: Take the most likely choice instead of sampling.
+        generator: Optional torch generator for reproducible sampling, on the logits' device.
+
+    Returns:
+        (..., len(nvec)) int64 actions.
+    """
+    out = []
+    for part in split_logits(logits, nvec):
+        if deterministic:
+            out.append(part.argmax(dim=-1))
+            continue
+        probs = torch.softmax(part.float(), dim=-1).reshape(-1, part.shape[-1])
+        draw = torch.multinomial(probs, 1, generator=generator).reshape(part.shape[:-1])
+        out.append(draw)
+    return torch.stack(out, dim=-1)
+
+
+def log_prob(logits: Tensor, actions: Tensor, nvec: Sequence[int]) -> Tensor:
+    """Log-probability of MultiDiscrete actions: the sum over dimensions.
+
+    Args:
+        logits: (..., sum(nvec)).
+        actions: (..., len(nvec)) integer actions.
+
+    Returns:
+        (...) log-probabilities.
+    """
+    if actions.shape[-1] != len(nvec):
+        raise ValueError(f"actions: expected last dimension len(nvec) = {len(nvec)}, got {actions.shape[-1]}")
+    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
+    for i, part in enumerate(split_logits(logits, nvec)):
+        logp = torch.log_softmax(part, dim=-1)
+        total = total + logp.gather(-1, actions[..., i : i + 1].long()).squeeze(-1)
+    return total
+
+
+def entropy(logits: Tensor, nvec: Sequence[int]) -> Tensor:
+    """Entropy of the MultiDiscrete distribution: the sum of per-dimension entropies, (...)."""
+    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
+    for part in split_logits(logits, nvec):
+        logp = torch.log_softmax(part, dim=-1)
+        total = total - (logp.exp() * logp).sum(dim=-1)
+    return total
+
+
+def count_parameters(module: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in module.parameters() if p.requires_grad)

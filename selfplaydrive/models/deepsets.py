@@ -1,0 +1,179 @@
+"""Deep Sets + LSTM policy (paper section 3, PufferDrive's default model).
+
+Each modality is embedded by its own small MLP (per element for the object and road sets),
+each set is collapsed by an element-wise maximum over its valid elements, the three vectors are
+concatenated and fed to an MLP, an LSTM, and linear actor (one categorical per action
+dimension) and critic heads. At the paper's settings (64-d inputs, LSTM of 256) it has 596,757
+parameters; docs/models.md gives the arithmetic.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from itertools import pairwise
+
+import torch
+from torch import Tensor, nn
+
+from selfplaydrive.models.common import (
+    ObsSplitter,
+    State,
+    check_nvec,
+    check_positive,
+    compact_sets,
+    masked_max,
+    reset_state,
+)
+from selfplaydrive.sim.layout import ObsLayout
+
+
+def _encoder(in_dim: int, width: int) -> nn.Sequential:
+    # PufferDrive's encoder is Linear -> LayerNorm -> Linear; the GELU after the norm makes it an
+    # MLP proper (no parameters, so the count is unchanged).
+    return nn.Sequential(nn.Linear(in_dim, width), nn.LayerNorm(width), nn.GELU(), nn.Linear(width, width))
+
+
+def _orthogonal(module: nn.Module, gain: float) -> None:
+    for name, p in module.named_parameters():
+        if p.dim() >= 2:
+            nn.init.orthogonal_(p, gain)
+        elif "bias" in name and not isinstance(module, nn.LayerNorm):
+            nn.init.zeros_(p)
+
+
+class DeepSetsModel(nn.Module):
+    """Per-modality encoders, masked max pooling, MLP, LSTM, actor and critic heads.
+
+    Args:
+        layout: Observation layout of the env (`VecEnv.layout`), or its fields as a mapping.
+        action_nvec: Choices per action dimension, e.g. (7, 13) for acceleration x steering.
+        input_size: Width of every modality embedding (64 in the paper).
+        hidden_size: Width of the shared MLP output, the LSTM input (256).
+        lstm_size: LSTM hidden size (256).
+        compact: Drop all-padding slots before encoding (exact; faster for sparse scenes).
+    """
+
+    is_recurrent = True
+
+    def __init__(
+        self,
+        layout: ObsLayout | Mapping[str, int],
+        action_nvec: Sequence[int] = (7, 13),
+        input_size: int = 64,
+        hidden_size: int = 256,
+        lstm_size: int = 256,
+        compact: bool = True,
+    ) -> None:
+        super().__init__()
+        self.nvec = check_nvec(action_nvec)
+        self.input_size = check_positive("input_size", input_size)
+        self.hidden_size = check_positive("hidden_size", hidden_size)
+        self.lstm_size = check_positive("lstm_size", lstm_size)
+        self.compact = compact
+        self.splitter = ObsSplitter(layout)
+        s = self.splitter
+        self.ego_encoder = _encoder(s.ego_in, input_size)
+        self.object_encoder = _encoder(s.object_in, input_size)
+        self.road_encoder = _encoder(s.road_in, input_size)
+        self.shared = nn.Sequential(nn.GELU(), nn.Linear(3 * input_size, hidden_size), nn.ReLU())
+        self.lstm = nn.LSTM(hidden_size, lstm_size)
+        self.actor = nn.Linear(lstm_size, sum(self.nvec))
+        self.critic = nn.Linear(lstm_size, 1)
+        self._init_weights()
+
+    def _init_weights(self) -> None:
+        # PufferLib-style init: orthogonal sqrt(2) trunk, small actor (near-uniform initial policy),
+        # unit-gain critic, zero biases.
+        for m in (self.ego_encoder, self.object_encoder, self.road_encoder, self.shared):
+            _orthogonal(m, math.sqrt(2))
+        _orthogonal(self.lstm, 1.0)
+        _orthogonal(self.actor, 0.01)
+        _orthogonal(self.critic, 1.0)
+
+    def initial_state(self, batch_size: int, device: torch.device | str | None = None) -> State:
+        """Zero LSTM state: (h, c), each (batch_size, lstm_size)."""
+        h = torch.zeros(batch_size, self.lstm_size, device=device)
+        return (h, h.clone())
+
+    def encode(self, obs: Tensor) -> Tensor:
+        """Observation embedding before the LSTM.
+
+        Args:
+            obs: (B, obs_dim) flat observations.
+
+        Returns:
+            (B, hidden_size).
+        """
+        parts = self.splitter(obs)
+        objects, obj_valid = parts["objects"], parts["object_valid"]
+        road, road_valid = parts["road"], parts["road_valid"]
+        if self.compact:
+            objects, obj_valid = compact_sets(objects, obj_valid)
+            road, road_valid = compact_sets(road, road_valid)
+        ego = self.ego_encoder(parts["ego"])
+        obj = masked_max(self.object_encoder(objects), obj_valid)
+        rd = masked_max(self.road_encoder(road), road_valid)
+        return self.shared(torch.cat([ego, obj, rd], dim=1))
+
+    def forward(self, obs: Tensor, state: State, episode_start: Tensor) -> tuple[Tensor, Tensor, State]:
+        """One step for a batch of agents.
+
+        Args:
+            obs: (B, obs_dim) observations.
+            state: (h, c) from `initial_state` or the previous call, each (B, lstm_size).
+            episode_start: (B,) bool; True resets that agent's state before this step.
+
+        Returns:
+            logits (B, sum(nvec)), value (B,), new state (h, c).
+        """
+        self._check_state(state, obs.shape[0])
+        h, c = reset_state(state, episode_start)
+        x = self.encode(obs).unsqueeze(0)
+        out, (h, c) = self.lstm(x, (h.unsqueeze(0), c.unsqueeze(0)))
+        out = out.squeeze(0)
+        return self.actor(out), self.critic(out).squeeze(-1), (h.squeeze(0), c.squeeze(0))
+
+    def forward_sequence(
+        self, obs: Tensor, state: State, episode_start: Tensor
+    ) -> tuple[Tensor, Tensor, State]:
+        """Evaluate a rollout segment for PPO with truncated BPTT.
+
+        The encoder runs on all T*B observations at once; the LSTM runs over chunks between
+        the times at which some agent's episode starts, resetting those agents' state there.
+        The result equals T calls of `forward`.
+
+        Args:
+            obs: (T, B, obs_dim).
+            state: (h, c) at the start of the segment, each (B, lstm_size).
+            episode_start: (T, B) bool.
+
+        Returns:
+            logits (T, B, sum(nvec)), values (T, B), state after the last step.
+        """
+        if obs.dim() != 3 or episode_start.shape != obs.shape[:2]:
+            raise ValueError(
+                f"obs, episode_start: expected (T, B, obs_dim) and (T, B), "
+                f"got {tuple(obs.shape)} and {tuple(episode_start.shape)}"
+            )
+        t_len, b = obs.shape[:2]
+        self._check_state(state, b)
+        x = self.encode(obs.reshape(t_len * b, -1)).reshape(t_len, b, -1)
+        starts = episode_start.to(torch.bool)
+        bounds = [0, *[t for t in torch.nonzero(starts[1:].any(dim=1)).flatten().add(1).tolist()], t_len]
+        h, c = state
+        outs = []
+        for lo, hi in pairwise(bounds):
+            h, c = reset_state((h, c), starts[lo])
+            out, (h1, c1) = self.lstm(x[lo:hi], (h.unsqueeze(0), c.unsqueeze(0)))
+            h, c = h1.squeeze(0), c1.squeeze(0)
+            outs.append(out)
+        out = torch.cat(outs, dim=0)
+        return self.actor(out), self.critic(out).squeeze(-1), (h, c)
+
+    def _check_state(self, state: State, batch: int) -> None:
+        if len(state) != 2 or any(s.shape != (batch, self.lstm_size) for s in state):
+            shapes = [tuple(s.shape) for s in state]
+            raise ValueError(
+                f"state: expected (h, c) of shape ({batch}, {self.lstm_size}) each, got {shapes}"
+            )
