@@ -9,19 +9,26 @@ Column order is `COEFF_NAMES` / `HIDDEN_PARAMS` from `selfplaydrive.scenario.typ
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping
 
 import numpy as np
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS
 
-Range = tuple[float, float]
+# A range is a (low, high) pair or, as written in Hydra configs, a mapping {low: .., high: ..}
+# so that sweeps can override one end: `reward.collision.high=0.5,1.0`.
+Range = tuple[float, float] | Mapping[str, float]
 _MODES = ("train", "eval")
 
 
-def _check_range(name: str, value: Sequence[float], allow_equal: bool = True) -> Range:
-    """Validate a (low, high) pair and return it as floats."""
+def _check_range(name: str, value: Range, allow_equal: bool = True) -> tuple[float, float]:
+    """Validate a (low, high) pair or {low, high} mapping and return it as floats."""
+    if isinstance(value, Mapping):
+        unknown = set(value) - {"low", "high"}
+        if unknown or len(value) != 2:
+            raise ConfigError(f"{name} must have exactly the keys low and high, got {sorted(value)}")
+        value = (value["low"], value["high"])
     try:
         lo, hi = (float(v) for v in value)
     except (TypeError, ValueError) as exc:
