@@ -179,9 +179,7 @@ def build_model(cfg: Any, env: Any) -> Any:
     space = env.action_space
     nvec = [int(v) for v in np.asarray(getattr(space, "nvec", []))]
     if not nvec:
-        raise ConfigError(
-            f"model: the models need MultiDiscrete actions (env/actions=discrete), got {space}"
-        )
+        raise ConfigError(f"model: the models need MultiDiscrete actions (env/actions=discrete), got {space}")
     from dataclasses import asdict
 
     # the layout travels as a plain dict (max_objects, max_road, extra_dim): models accept either
