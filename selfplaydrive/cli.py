@@ -144,9 +144,38 @@ def cmd_map(argv: Sequence[str]) -> int:
         return 1
 
 
+def cmd_bench(argv: Sequence[str]) -> int:
+    """``selfplaydrive bench [--json] [--map PATH] ...``: simulator throughput (sim/bench.py)."""
+    from selfplaydrive.sim.bench import main as bench_main
+
+    try:
+        bench_main(list(argv))
+    except (MapError, ConfigError) as exc:
+        print(f"selfplaydrive bench: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_render(argv: Sequence[str]) -> int:
+    """``selfplaydrive render [--map SPEC] [--driver D] [-o out.gif] ...``: draw an episode."""
+    from selfplaydrive.render.video import main as render_main
+
+    return render_main(list(argv))
+
+
 # command name -> (function taking the remaining argv and returning an exit code, one-line help)
+def cmd_train(argv: Sequence[str]) -> int:
+    """``selfplaydrive train [hydra overrides] [-m]``: PPO training (docs/training.md)."""
+    from selfplaydrive.hydra_app import cmd_train as train
+
+    return train(argv)
+
+
 COMMANDS: dict[str, tuple[Callable[[Sequence[str]], int], str]] = {
+    "train": (cmd_train, "train a policy (Hydra overrides, -m for sweeps)"),
     "map": (cmd_map, "inspect (info) and draw (render) road maps"),
+    "render": (cmd_render, "drive an episode and draw it top-down (PNG frames, GIF, MP4)"),
+    "bench": (cmd_bench, "simulator throughput in the paper configuration (agent-steps/s)"),
 }
 
 

@@ -300,6 +300,7 @@ def draw_map(
     region: Region | None = None,
     fill_lanes: bool = True,
     legend: bool = True,
+    lights: bool = True,
 ) -> Axes:
     """Draw `road_map` top-down onto `ax` (local frame, metres, equal aspect).
 
@@ -311,6 +312,8 @@ def draw_map(
         region: (xmin, ymin, xmax, ymax) [m] crop in the local frame; default the map bounds.
         fill_lanes: Fill lane areas (centerline +- width/2) in grey.
         legend: Add a legend of what was drawn (outside the axes, to the right).
+        lights: Draw traffic-light stop lines (coloured by signal group); the episode renderer
+            turns this off and draws them itself, coloured by their current state.
 
     Returns:
         `ax`.
@@ -329,7 +332,8 @@ def draw_map(
     handles += _draw_edges(ax, road_map, view, lw)
     handles += _draw_crosswalks(ax, road_map, view, lw)
     handles += _draw_stops(ax, road_map, view, lw)
-    handles += _draw_lights(ax, road_map, view, lw)
+    if lights:
+        handles += _draw_lights(ax, road_map, view, lw)
     if arrows:
         handles += _draw_graph(ax, road_map, lane_hit, view)
     ax.set_xlabel("x [m] (local frame)")

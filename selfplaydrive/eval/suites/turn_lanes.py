@@ -1,0 +1,304 @@
+"""Suite "turning from the correct lane" (paper section 5.3): the ego must turn at the next
+junction but starts in a lane from which the turn is not legal, so it has to change lanes.
+
+Generation (from the lane graph only, so it works on procedural and Lanelet2 maps):
+
+1. A *turn* is a junction lane J whose heading changes by at least `min_turn` (left or right).
+   Its *correct lanes* are the non-junction lanes from which J is reached by lane following
+   alone (backward search from J's predecessors, up to `search_back` m).
+2. A *wrong lane* W is a neighbour (left/right, up to three hops) of a correct lane that is not
+   itself correct, yet reaches a correct lane by following lanes and legal lane changes toward
+   the turn side only (a left turn needs changes to the left). Each (J, W) pair is a site.
+3. The ego is placed on W's centerline, heading along it, `start_distance` m (drawn) before
+   J's start measured along the correct corridor, at least 0.75 lane widths beside it,
+   leaving at least `change_room` m of W ahead when the change must happen on W itself.
+   Initial speed U(`speed`) capped by 0.8 times the speed limit; a car-sized vehicle;
+   waypoints on the exit lane 10 m and 30 m after the junction force the turn.
+
+Classification (`classify_turn`, pure, from the trajectory): the ego *turned* when its centre
+came within half a lane width + 1 m of the exit lane, heading within 45 degrees of it. The
+*entry* is the first frame its centre crosses the line through J's start perpendicular to the
+approach; the entry offset is its lateral distance from the correct lane's centre there. The
+outcome is "correct_lane" (turned, entry offset below half the lane width), "wrong_lane"
+(turned from elsewhere) or "no_turn". The lane change time is the start of the last unbroken
+run of frames with the centre inside the correct lane before the entry; the report gives how
+many seconds (and metres) before the entry the ego changed lanes.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from selfplaydrive.eval.stats import mean_estimate, proportion
+from selfplaydrive.eval.suites.base import (
+    SuiteScenario,
+    Trajectory,
+    blank_scenario,
+    put_agent,
+    warn_shortfall,
+)
+from selfplaydrive.eval.suites.geometry import LaneGeometry, cumlen, point_at, project, wrap
+from selfplaydrive.maps.roadmap import RoadMap
+from selfplaydrive.scenario.vehicles import DEFAULT_CATEGORIES, VehicleSizeSampler
+
+OUTCOMES = ("correct_lane", "wrong_lane", "no_turn")
+CAR_CATEGORIES = tuple(c for c in DEFAULT_CATEGORIES if c[0] in ("small_car", "car", "suv_van"))
+
+
+class TurnLaneSuite:
+    """Generator and classifier of the turning-from-the-correct-lane suite.
+
+    Args:
+        min_turn: Heading change [rad] that makes a junction lane a turn.
+        start_distance: (low, high) distance [m] of the start before the junction.
+        speed: (low, high) initial speed [m/s], capped by 0.8 x the lane speed limit.
+        change_room: Lane length [m] left ahead of the start when the change is due on it.
+        search_back: How far back [m] correct lanes are searched.
+        episode_length: [s].
+    """
+
+    name = "turn_lanes"
+
+    def __init__(
+        self,
+        min_turn: float = 0.7,
+        start_distance: tuple[float, float] = (30.0, 100.0),
+        speed: tuple[float, float] = (5.0, 8.0),
+        change_room: float = 12.0,
+        search_back: float = 250.0,
+        episode_length: float = 25.0,
+    ) -> None:
+        if not 0.0 < start_distance[0] <= start_distance[1]:
+            raise ValueError(f"start_distance: expected 0 < low <= high [m], got {start_distance}")
+        if not 0.0 <= speed[0] <= speed[1]:
+            raise ValueError(f"speed: expected 0 <= low <= high [m/s], got {speed}")
+        self.min_turn = float(min_turn)
+        self.start_distance = (float(start_distance[0]), float(start_distance[1]))
+        self.speed = (float(speed[0]), float(speed[1]))
+        self.change_room = float(change_room)
+        self.search_back = float(search_back)
+        self.episode_length = float(episode_length)
+
+    # -- generation -------------------------------------------------------------------------
+    def sites(self, road_map: RoadMap) -> list[tuple[int, int, int]]:
+        """All (junction lane J, its approach lane P, wrong start lane W) triples of the map."""
+        geo = LaneGeometry(road_map)
+        L = geo.lanes
+        out = []
+        for j in np.flatnonzero(L.in_junction & geo.vehicle):
+            turn = geo.turn(j)
+            if abs(turn) < self.min_turn or not any(geo.vehicle[q] for q in L.successors(j)):
+                continue
+            for p in L.predecessors(j):
+                if L.in_junction[p] or not geo.vehicle[p]:
+                    continue
+                up = _upstream(geo, int(p), self.search_back)
+                for w in _neighbours(geo, up):
+                    if _reaches_by_changes(geo, w, up, left=turn > 0):
+                        out.append((int(j), int(p), w))
+        return out
+
+    def generate(
+        self, road_map: RoadMap, rng: np.random.Generator, count: int, map_index: int = 0
+    ) -> list[SuiteScenario]:
+        """Up to `count` scenarios at distinct sites (random order); fewer with a warning."""
+        geo = LaneGeometry(road_map)
+        sites = self.sites(road_map)
+        order = rng.permutation(len(sites))
+        sizes = VehicleSizeSampler(CAR_CATEGORIES)
+        out: list[SuiteScenario] = []
+        for i in order:
+            if len(out) >= count:
+                break
+            item = self._build(geo, *sites[i], rng, sizes, map_index)
+            if item is not None:
+                out.append(item)
+        warn_shortfall(self.name, road_map, len(out), count, f"{len(sites)} candidate sites")
+        return out
+
+    def _build(self, geo, j, p, w, rng, sizes, map_index) -> SuiteScenario | None:
+        """One scenario at site (j, p, w), or None when no start point fits."""
+        L = geo.lanes
+        nonj = lambda i: not L.in_junction[i]  # noqa: E731
+        back = geo.chain_back(p, self.search_back, allow=nonj)
+        exit_chain = geo.chain_forward(geo.straightest_succ(j), 60.0)
+        corridor = geo.path([*back, j])
+        s_entry = cumlen(corridor)[-1] - geo.length[j]
+        exit_path = geo.path(exit_chain)
+        if cumlen(exit_path)[-1] < 15.0:
+            return None
+        first_change = _first_move_is_change(geo, w, set(_upstream(geo, p, self.search_back)), j)
+        room = self.change_room if first_change else 0.0
+        s = np.arange(0.0, max(geo.length[w] - room, 0.0) + 1e-9, 1.0)
+        xy, hd = point_at(geo.line(w), s)
+        sp, lat, _ = project(corridor, xy)
+        d_entry = s_entry - sp
+        # clearly in another lane: not at a split where both lanes still share the centerline
+        ok = (sp > 0.5) & (np.abs(lat) >= 0.75 * L.width[p]) & (np.abs(lat) < 3.0 * L.width[p] + 1.0)
+        ok &= (d_entry >= self.start_distance[0]) & (d_entry <= self.start_distance[1])
+        if not ok.any():
+            return None
+        k = int(rng.choice(np.flatnonzero(ok)))
+        length, width, _ = sizes.sample(rng, 1)
+        v = min(rng.uniform(*self.speed), 0.8 * float(L.speed_limit[w]))
+        wp, _ = point_at(exit_path, np.array([10.0, min(30.0, cumlen(exit_path)[-1])]))
+        sc = blank_scenario(geo.road_map, map_index, xy[k], self.episode_length)
+        put_agent(sc, 0, xy[k], float(hd[k]), v, (float(length[0]), float(width[0])), w, wp)
+        wrong = geo.path(geo.chain_forward(w, 250.0, allow=nonj))
+        info = {
+            "map": geo.road_map.name,
+            "turn": "left" if geo.turn(j) > 0 else "right",
+            "junction_lane": int(j),
+            "approach_lane": int(p),
+            "start_lane": int(w),
+            "start_lane_id": str(L.source_id[w]),
+            "junction_lane_id": str(L.source_id[j]),
+            "start_distance_m": float(d_entry[k]),
+            "start_speed_mps": float(v),
+            "lane_width_m": float(L.width[p]),
+            "entry_arc_m": float(s_entry),
+        }
+        paths = {"corridor": corridor, "exit": exit_path, "wrong": wrong}
+        return SuiteScenario(self.name, sc, paths, info)
+
+    # -- classification ---------------------------------------------------------------------
+    def classify(self, item: SuiteScenario, traj: Trajectory) -> dict[str, Any]:
+        return classify_turn(item, traj)
+
+    def summarise(self, outcomes: Sequence[dict[str, Any]]) -> dict[str, Any]:
+        return summarise_turns(outcomes)
+
+
+def _upstream(geo: LaneGeometry, p: int, limit: float) -> list[int]:
+    """Non-junction lanes from which lane p is reached by following lanes (p included)."""
+    L = geo.lanes
+    seen, queue, out = {p: 0.0}, deque([p]), [p]
+    while queue:
+        x = queue.popleft()
+        for q in L.predecessors(x):
+            q = int(q)
+            d = seen[x] + geo.length[q]
+            if q in seen or L.in_junction[q] or not geo.vehicle[q] or d > limit:
+                continue
+            seen[q] = d
+            out.append(q)
+            queue.append(q)
+    return out
+
+
+def _neighbours(geo: LaneGeometry, lanes: list[int]) -> list[int]:
+    """Lanes up to three left/right hops from `lanes`, not among them, outside junctions."""
+    L, base = geo.lanes, set(lanes)
+    found: set[int] = set()
+    for x in lanes:
+        for side in (L.left, L.right):
+            y = x
+            for _ in range(3):
+                y = int(side[y])
+                if y < 0:
+                    break
+                if y not in base and not L.in_junction[y] and geo.vehicle[y]:
+                    found.add(y)
+    return sorted(found)
+
+
+def _moves(geo: LaneGeometry, x: int, left: bool) -> list[tuple[int, bool]]:
+    """(next lane, is a lane change) moves from x: following outside junctions, legal changes
+    toward the turn side."""
+    L = geo.lanes
+    out = [(int(q), False) for q in L.successors(x) if not L.in_junction[q] and geo.vehicle[q]]
+    nb, legal = (L.left[x], L.left_legal[x]) if left else (L.right[x], L.right_legal[x])
+    if nb >= 0 and legal and geo.vehicle[nb]:
+        out.append((int(nb), True))
+    return out
+
+
+def _reaches_by_changes(geo: LaneGeometry, w: int, up: list[int], left: bool, depth: int = 12) -> bool:
+    """Whether lane w reaches a lane of `up` with lane changes toward the turn side."""
+    target, seen, queue = set(up), {w}, deque([(w, 0)])
+    while queue:
+        x, d = queue.popleft()
+        for y, _ in _moves(geo, x, left):
+            if y in target:
+                return True
+            if y not in seen and d < depth:
+                seen.add(y)
+                queue.append((y, d + 1))
+    return False
+
+
+def _first_move_is_change(geo: LaneGeometry, w: int, up: set[int], j: int) -> bool:
+    """True when no following successor of w leads toward `up` (the change must happen on w)."""
+    left = geo.turn(j) > 0
+    follow = [y for y, change in _moves(geo, w, left) if not change]
+    return not any(_reaches_by_changes(geo, y, list(up), left) or y in up for y in follow)
+
+
+# -- classifier ---------------------------------------------------------------------------------
+def classify_turn(item: SuiteScenario, traj: Trajectory, slot: int = 0) -> dict[str, Any]:
+    """Outcome of one turn-lane episode (see the module docstring); a pure function.
+
+    Returns:
+        outcome ("correct_lane" | "wrong_lane" | "no_turn"), turn ("left" | "right"),
+        entry_offset_m, lane_change_lead_s / lane_change_lead_m (None without a change into
+        the correct lane before the entry), collided.
+    """
+    corridor, exit_path = item.paths["corridor"], item.paths["exit"]
+    width = float(item.info["lane_width_m"])
+    s_entry = float(item.info["entry_arc_m"])
+    alive = traj.active[:, slot]
+    xy = traj.xy[:, slot].astype(np.float64)[alive]
+    hd = traj.heading[:, slot].astype(np.float64)[alive]
+    t = traj.time[alive]
+    out: dict[str, Any] = {
+        "outcome": "no_turn",
+        "turn": item.info["turn"],
+        "entry_offset_m": None,
+        "lane_change_lead_s": None,
+        "lane_change_lead_m": None,
+        "collided": bool(traj.collided[slot]),
+    }
+    if len(xy) < 2:
+        return out
+    s_c, lat_c, _ = project(corridor, xy)
+    entry = np.flatnonzero((s_c[1:] >= s_entry) & (s_c[:-1] < s_entry) & (np.abs(lat_c[1:]) < 3 * width))
+    turned = _turned(exit_path, xy, hd, width)
+    if len(entry):
+        e = int(entry[0]) + 1
+        out["entry_offset_m"] = float(abs(lat_c[e]))
+        inside = (np.abs(lat_c[:e]) < width / 2) & (s_c[:e] > 0.5)
+        if inside[-1] and not inside.all():
+            c = int(np.flatnonzero(~inside)[-1]) + 1  # first frame of the last run inside
+            out["lane_change_lead_s"] = float(t[e] - t[c])
+            out["lane_change_lead_m"] = float(s_entry - s_c[c])
+    if turned:
+        correct = out["entry_offset_m"] is not None and out["entry_offset_m"] < width / 2
+        out["outcome"] = "correct_lane" if correct else "wrong_lane"
+    return out
+
+
+def _turned(exit_path: np.ndarray, xy: np.ndarray, hd: np.ndarray, width: float) -> bool:
+    """The centre came onto the exit lane (5 to 40 m along it), heading within 45 deg."""
+    s, _, dist = project(exit_path, xy)
+    _, lane_hd = point_at(exit_path, s)
+    on = (dist < width / 2 + 1.0) & (s > 5.0) & (s < 40.0) & (np.abs(wrap(hd - lane_hd)) < np.pi / 4)
+    return bool(on.any())
+
+
+def summarise_turns(outcomes: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Proportions per outcome (all, left, right) and lane-change lead times [s] by direction."""
+    res: dict[str, Any] = {"n": len(outcomes)}
+    for group in ("all", "left", "right"):
+        rows = [o for o in outcomes if group == "all" or o["turn"] == group]
+        g: dict[str, Any] = {"n": len(rows)}
+        for name in OUTCOMES:
+            g[name] = proportion(sum(o["outcome"] == name for o in rows), len(rows)).to_dict()
+        lead = np.array([o["lane_change_lead_s"] for o in rows if o["lane_change_lead_s"] is not None])
+        g["lane_change_lead_s"] = mean_estimate(lead).to_dict() if len(lead) >= 2 else None
+        g["lane_change_lead_s_median"] = float(np.median(lead)) if len(lead) else None
+        res[group] = g
+    return res
