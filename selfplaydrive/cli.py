@@ -171,8 +171,16 @@ def cmd_train(argv: Sequence[str]) -> int:
     return train(argv)
 
 
+def cmd_eval(argv: Sequence[str]) -> int:
+    """``selfplaydrive eval [hydra overrides]``: suites and long-form evaluation (docs/analyses.md)."""
+    from selfplaydrive.hydra_app import cmd_eval as evaluate
+
+    return evaluate(argv)
+
+
 COMMANDS: dict[str, tuple[Callable[[Sequence[str]], int], str]] = {
     "train": (cmd_train, "train a policy (Hydra overrides, -m for sweeps)"),
+    "eval": (cmd_eval, "rule-adherence suites and long-form evaluation (Hydra overrides)"),
     "map": (cmd_map, "inspect (info) and draw (render) road maps"),
     "render": (cmd_render, "drive an episode and draw it top-down (PNG frames, GIF, MP4)"),
     "bench": (cmd_bench, "simulator throughput in the paper configuration (agent-steps/s)"),

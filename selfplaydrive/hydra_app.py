@@ -109,3 +109,10 @@ def train_task(cfg: Any) -> dict[str, Any]:
 def cmd_train(argv: Sequence[str]) -> int:
     """``selfplaydrive train [overrides] [-m]``."""
     return run_hydra("train", train_task, argv)
+
+
+def cmd_eval(argv: Sequence[str]) -> int:
+    """``selfplaydrive eval [overrides] [-m]``."""
+    from selfplaydrive.eval.app import eval_task
+
+    return run_hydra("eval", eval_task, argv)
