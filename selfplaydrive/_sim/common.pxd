@@ -81,6 +81,7 @@ cdef enum:
 cdef enum:
     PHYS_BICYCLE = 0
     PHYS_FRICTION = 1
+    PHYS_EXTERNAL = 2   # dynamics stepped in Python before the kernel (physics/pymunk_model.py)
 
 # Observation block sizes (obs/layout): features per object and per road segment.
 cdef enum:
@@ -90,11 +91,20 @@ cdef enum:
 
 
 ctypedef struct Atlas:
-    # Read-only road data of every map of the env, concatenated (sim/atlas.py).
+    # Read-only road data of every map of the env, concatenated (sim/atlas.py). Segment arrays
+    # are in atlas order (per map, sorted by grid cell); seg_id / seg_pos convert to and from
+    # the global segment index reported in `Sim.road_idx`.
     int num_maps             # number of maps
     const float* seg_start   # (Ns, 2) [m] segment first endpoint, local frame of its map
     const float* seg_end     # (Ns, 2) [m] second endpoint
     const float* seg_mid     # (Ns, 2) [m] midpoint
+    const float* seg_mx      # (Ns,) [m] midpoint x (a copy of seg_mid[:, 0] for contiguous scans)
+    const float* seg_my      # (Ns,) [m] midpoint y
+    const int32_t* seg_id    # (Ns,) global segment index of each atlas position
+    const int32_t* seg_pos   # (Ns,) atlas position of each global segment index
+    const float* seg_rec     # (Ns, 8) packed road-row record: mid x, mid y, dir x, dir y,
+                             # min(length / length_scale, 1), type / 4, signal group (-1: none),
+                             # global segment index (int32 bits) (_sim/rows.h)
     const float* seg_dir     # (Ns, 2) unit direction start -> end (precomputed: no trig per step)
     const float* seg_len     # (Ns,) [m] length
     const int8_t* seg_type   # (Ns,) SEG_* type
@@ -104,8 +114,8 @@ ctypedef struct Atlas:
     const int32_t* grid_nx   # (M,) cells along x
     const int32_t* grid_ny   # (M,) cells along y
     const int64_t* cell_base # (M,) offset of map m's first cell in cell_offsets
-    const int32_t* cell_offsets  # (sum nx*ny + M,) CSR offsets into cell_items (global)
-    const int32_t* cell_items    # (Ns,) global segment indices bucketed by cell
+    const int32_t* cell_offsets  # (sum nx*ny + M,) CSR: cell c of map m holds atlas positions
+                                 # [cell_offsets[cell_base[m] + c], cell_offsets[... + c + 1])
     const float* max_seg_len # (M,) [m] longest segment of each map
 
 
@@ -138,6 +148,13 @@ ctypedef struct Params:
     float lateral_scale      # [m] observation scale of the lane offset s
     const float* coeff_scale # (NUM_COEFFS,) observation scale of each reward coefficient
     int max_substeps         # cap on collision sub-steps per pair (anti-tunnelling)
+    # reciprocals of the scales above (multiplications instead of divisions in inner loops)
+    float inv_pos_scale
+    float inv_wp_scale
+    float inv_length_scale
+    float inv_width_scale
+    float inv_lateral_scale
+    float inv_max_speed
 
 
 ctypedef struct Sim:
@@ -181,6 +198,10 @@ ctypedef struct Sim:
     uint8_t* ever            # EV_* bits accumulated over the episode
     int32_t* road_idx        # (N, max_road) road segments chosen by the events gather
     int32_t* road_n          # (N,) number of valid entries in road_idx
+    float* road_r            # (N,) [m] distance of the max_road-th nearest segment at the last
+                             # gather (obs_radius when fewer lie within it); < 0: no gather yet
+    float* road_x            # (N,) [m] position of that gather (the bound holds wherever the
+    float* road_y            # agent moved since, teleports included)
     int32_t* act_i           # (N, 2) discrete action indices (accel, steer)
     float* act_f             # (N, 2) continuous actions [m/s^2], [rad]
     float* reward            # (N,) summed reward of the last step

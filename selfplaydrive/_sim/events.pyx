@@ -1,17 +1,19 @@
 # cython: language_level=3
 """Events of one step (paper sections 2.2-2.3): traffic lights and pedestrians advance,
-vehicle and pedestrian collisions on the true oriented boxes, and one road gather per agent
-that feeds road-edge contact, red-light crossing, lane association and the road observation.
+vehicle and pedestrian collisions on the true oriented boxes. The road events and the road
+gather of the observation are in road.pyx.
 """
 
-from libc.math cimport sqrt, ceil, floor, atan2, cos, sin, fabs
-from libc.stdint cimport int32_t, int64_t
-from selfplaydrive._sim.common cimport (Sim, Params, Atlas, SEG_LANE, SEG_EDGE, SEG_LIGHT,
-                                        LIGHT_RED, EV_COLLIDE, EV_PED, EV_OFFROAD, EV_RED,
-                                        EV_WAYPOINT, EV_COMFORT, C_RADIUS)
-from selfplaydrive._sim.geometry cimport (obb_overlap, seg_box, segs_cross, box_radius,
-                                          wrap_angle, select_nearest_binned)
+from libc.math cimport sqrt, ceil, cos, sin
+from libc.stdint cimport int64_t
+from selfplaydrive._sim.common cimport Sim, Params, EV_COLLIDE, EV_PED
+from selfplaydrive._sim.geometry cimport obb_overlap, box_radius, wrap_angle
 from selfplaydrive._sim.rng cimport rng_int, rng_uniform
+
+# slack of the collision pre-test (relative on the squared reach, and absolute [m^2]): far
+# above float32 rounding, so a pair it skips is one swept_overlap would reject too
+DEF PRE_SLACK = 1.001
+DEF PRE_ABS = 1e-4
 
 
 cdef void lights_peds_world(Sim* sim, const Params* prm, int w) noexcept nogil:
@@ -125,9 +127,15 @@ cdef inline bint agents_hit(Sim* sim, int i, int j, int max_sub) noexcept nogil:
 cdef void collisions_world(Sim* sim, const Params* prm, int w) noexcept nogil:
     """Set EV_COLLIDE / EV_PED on active agents of world `w` whose box meets another body.
 
-    Bodies: active agents, ended agents kept as obstacles, static vehicles, pedestrians.
+    Bodies: active agents, ended agents kept as obstacles, static vehicles, pedestrians. A
+    pair is tested exactly (`swept_overlap`) only when the final centres lie within the sum of
+    both swept radii (bounding radius + this step's motion), a bound that is never smaller
+    than swept_overlap's own early-out distance: the pre-test changes no result.
     """
-    cdef int a, b, i, j, k, n = sim.A
+    cdef int a, b, i, j, k, n = sim.A, S = sim.S, P = sim.P
+    cdef float* rad = sim.cand_d + <int64_t>w * sim.cand_cap   # scratch: swept radius per body
+    cdef float dx, dy, sr
+    swept_radii(sim, w, rad)
     for a in range(n):
         i = w * n + a
         if not (sim.active[i] or sim.obstacle[i]):
@@ -136,6 +144,11 @@ cdef void collisions_world(Sim* sim, const Params* prm, int w) noexcept nogil:
             j = w * n + b
             if not (sim.active[j] or sim.obstacle[j]) or not (sim.active[i] or sim.active[j]):
                 continue
+            dx = sim.x[j] - sim.x[i]
+            dy = sim.y[j] - sim.y[i]
+            sr = rad[a] + rad[b]
+            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
+                continue
             if agents_hit(sim, i, j, prm.max_substeps):
                 if sim.active[i]:
                     sim.events[i] |= EV_COLLIDE
@@ -143,153 +156,55 @@ cdef void collisions_world(Sim* sim, const Params* prm, int w) noexcept nogil:
                     sim.events[j] |= EV_COLLIDE
         if not sim.active[i]:
             continue
-        for k in range(w * sim.S, (w + 1) * sim.S):
-            if sim.st_valid[k] and swept_overlap(
+        for k in range(S):
+            j = w * S + k
+            if not sim.st_valid[j]:
+                continue
+            dx = sim.st_x[j] - sim.x[i]
+            dy = sim.st_y[j] - sim.y[i]
+            sr = rad[a] + rad[n + k]
+            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
+                continue
+            if swept_overlap(
                     sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
                     sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
-                    sim.st_x[k], sim.st_y[k], 0.0, sim.st_x[k], sim.st_y[k], 0.0,
-                    sim.st_cos[k], sim.st_sin[k], 0.5 * sim.st_len[k], 0.5 * sim.st_wid[k],
+                    sim.st_x[j], sim.st_y[j], 0.0, sim.st_x[j], sim.st_y[j], 0.0,
+                    sim.st_cos[j], sim.st_sin[j], 0.5 * sim.st_len[j], 0.5 * sim.st_wid[j],
                     prm.max_substeps):
                 sim.events[i] |= EV_COLLIDE
-        for k in range(w * sim.P, (w + 1) * sim.P):
-            if sim.ped_valid[k] and sim.ped_here[k]:
-                if swept_overlap(
-                        sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
-                        sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
-                        sim.ped_px[k], sim.ped_py[k], 0.0, sim.ped_x[k], sim.ped_y[k], 0.0,
-                        sim.ped_cos[k], sim.ped_sin[k], 0.5 * sim.ped_len[k], 0.5 * sim.ped_wid[k],
-                        prm.max_substeps):
-                    sim.events[i] |= EV_PED
-
-
-cdef void road_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
-    """One road gather per active agent of world `w`: road-edge contact, red-light crossing,
-    lane association, waypoint and comfort events, and the nearest `max_road` segments kept in
-    `road_idx` for the observation (section 2.5)."""
-    cdef int a, i
-    for a in range(sim.A):
-        i = w * sim.A + a
-        if sim.active[i]:
-            road_agent(sim, atlas, prm, w, i)
-            waypoint_comfort(sim, prm, i)
-
-
-cdef void waypoint_comfort(Sim* sim, const Params* prm, int i) noexcept nogil:
-    cdef int k = sim.wp_idx[i]
-    cdef float dx, dy, r
-    if k < sim.num_wp[i]:
-        dx = sim.waypoints[(i * sim.K + k) * 2] - sim.x[i]
-        dy = sim.waypoints[(i * sim.K + k) * 2 + 1] - sim.y[i]
-        r = sim.coeffs[i * 8 + C_RADIUS]
-        if dx * dx + dy * dy < r * r:
-            sim.events[i] |= EV_WAYPOINT
-            sim.wp_idx[i] = k + 1
-    if fabs(sim.a_long[i]) > prm.comfort_limit or fabs(sim.a_lat[i]) > prm.comfort_limit:
-        sim.events[i] |= EV_COMFORT
-
-
-cdef void road_agent(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i) noexcept nogil:
-    cdef int m = sim.map_id[w], ix, iy, lo_x, hi_x, lo_y, hi_y, nx, ny, n = 0, s, keep
-    cdef int best_c = -1, best_a = -1, t, g, cap = sim.cand_cap
-    cdef int64_t base = atlas.cell_base[m], c0, k
-    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i]
-    cdef float hl = 0.5 * sim.length[i], hw = 0.5 * sim.width[i], R = prm.obs_radius
-    cdef float ox = atlas.grid_origin[2 * m], oy = atlas.grid_origin[2 * m + 1], cell = atlas.grid_cell[m]
-    cdef float half_seg = 0.5 * atlas.max_seg_len[m], mx, my, d2, near, lane_far, dc = 1e30, da = 1e30
-    cdef float dpx = x - sim.px[i], dpy = y - sim.py[i], ld
-    cdef int32_t* cand = sim.cand + <int64_t>w * cap
-    cdef float* cd = sim.cand_d + <int64_t>w * cap
-    cdef unsigned char bits = 0
-    near = box_radius(hl, hw) + half_seg + sqrt(dpx * dpx + dpy * dpy)
-    near = near * near
-    lane_far = prm.lane_radius + half_seg
-    lane_far = lane_far * lane_far
-    nx = atlas.grid_nx[m]
-    ny = atlas.grid_ny[m]
-    lo_x = max(0, <int>floor((x - R - ox) / cell))
-    hi_x = min(nx - 1, <int>floor((x + R - ox) / cell))
-    lo_y = max(0, <int>floor((y - R - oy) / cell))
-    hi_y = min(ny - 1, <int>floor((y + R - oy) / cell))
-    for ix in range(lo_x, hi_x + 1):
-        c0 = base + ix * ny
-        for k in range(atlas.cell_offsets[c0 + lo_y], atlas.cell_offsets[c0 + hi_y + 1]):
-            s = atlas.cell_items[k]
-            mx = atlas.seg_mid[2 * s] - x
-            my = atlas.seg_mid[2 * s + 1] - y
-            d2 = mx * mx + my * my
-            if d2 > R * R:
+        for k in range(P):
+            j = w * P + k
+            if not (sim.ped_valid[j] and sim.ped_here[j]):
                 continue
-            if n < cap:
-                cand[n] = s
-                cd[n] = d2
-                n += 1
-            if d2 > near and d2 > lane_far:
+            dx = sim.ped_x[j] - sim.x[i]
+            dy = sim.ped_y[j] - sim.y[i]
+            sr = rad[a] + rad[n + S + k]
+            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
                 continue
-            t = atlas.seg_type[s]
-            if t == SEG_LANE:
-                if d2 <= lane_far:
-                    ld = point_seg_d2(atlas, s, x, y)
-                    if ld <= prm.lane_radius * prm.lane_radius:
-                        if atlas.seg_dir[2 * s] * c + atlas.seg_dir[2 * s + 1] * sn > 0.0:
-                            if ld < dc:
-                                dc = ld
-                                best_c = s
-                        if ld < da:
-                            da = ld
-                            best_a = s
-            elif d2 <= near and t == SEG_EDGE:
-                if box_touches(atlas, s, x, y, c, sn, hl, hw):
-                    bits |= EV_OFFROAD
-            elif d2 <= near and t == SEG_LIGHT:
-                g = atlas.seg_group[s]
-                if g >= 0 and g < sim.G and sim.light_state[w * sim.G + g] == LIGHT_RED:
-                    if box_touches(atlas, s, x, y, c, sn, hl, hw) or segs_cross(
-                            sim.px[i], sim.py[i], x, y, atlas.seg_start[2 * s], atlas.seg_start[2 * s + 1],
-                            atlas.seg_end[2 * s], atlas.seg_end[2 * s + 1]):
-                        bits |= EV_RED
-    sim.events[i] |= bits
-    associate_lane(sim, atlas, i, best_c if best_c >= 0 else best_a)
-    keep = min(n, sim.max_road)
-    select_nearest_binned(cd, cand, n, keep, R * R)
-    for k in range(keep):
-        sim.road_idx[<int64_t>i * sim.max_road + k] = cand[k]
-    sim.road_n[i] = keep
+            if swept_overlap(
+                    sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
+                    sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
+                    sim.ped_px[j], sim.ped_py[j], 0.0, sim.ped_x[j], sim.ped_y[j], 0.0,
+                    sim.ped_cos[j], sim.ped_sin[j], 0.5 * sim.ped_len[j], 0.5 * sim.ped_wid[j],
+                    prm.max_substeps):
+                sim.events[i] |= EV_PED
 
 
-cdef inline bint box_touches(const Atlas* atlas, int s, float x, float y, float c, float sn,
-                             float hl, float hw) noexcept nogil:
-    return seg_box(atlas.seg_start[2 * s], atlas.seg_start[2 * s + 1], atlas.seg_end[2 * s],
-                   atlas.seg_end[2 * s + 1], x, y, c, sn, hl, hw)
-
-
-cdef inline float point_seg_d2(const Atlas* atlas, int s, float x, float y) noexcept nogil:
-    """Squared distance [m^2] from (x, y) to segment s."""
-    cdef float ux = x - atlas.seg_start[2 * s], uy = y - atlas.seg_start[2 * s + 1]
-    cdef float dx = atlas.seg_dir[2 * s], dy = atlas.seg_dir[2 * s + 1]
-    cdef float t = ux * dx + uy * dy
-    if t < 0.0:
-        t = 0.0
-    elif t > atlas.seg_len[s]:
-        t = atlas.seg_len[s]
-    ux = ux - t * dx
-    uy = uy - t * dy
-    return ux * ux + uy * uy
-
-
-cdef void associate_lane(Sim* sim, const Atlas* atlas, int i, int s) noexcept nogil:
-    """Signed lateral offset s (+ right of the lane direction) and angle alpha of agent i to
-    centerline segment `s` (section 2.3); no lane within `lane_radius` gives s = alpha = 0."""
-    cdef float dx, dy, ux, uy, c = sim.hcos[i], sn = sim.hsin[i]
-    if s < 0:
-        sim.lane_valid[i] = 0
-        sim.lane_s[i] = 0.0
-        sim.lane_alpha[i] = 0.0
-        return
-    dx = atlas.seg_dir[2 * s]
-    dy = atlas.seg_dir[2 * s + 1]
-    ux = sim.x[i] - atlas.seg_start[2 * s]
-    uy = sim.y[i] - atlas.seg_start[2 * s + 1]
-    sim.lane_valid[i] = 1
-    sim.lane_s[i] = ux * dy - uy * dx
-    # the one atan2 per agent: alpha is needed as an angle by the alignment reward
-    sim.lane_alpha[i] = atan2(dx * sn - dy * c, dx * c + dy * sn)
+cdef void swept_radii(Sim* sim, int w, float* rad) noexcept nogil:
+    """rad[body] = bounding radius + distance moved this step [m], bodies ordered agents,
+    statics, pedestrians (the scratch holds at least A + S + P floats)."""
+    cdef int a, k, i, n = sim.A, S = sim.S, P = sim.P
+    cdef float dx, dy
+    for a in range(n):
+        i = w * n + a
+        dx = sim.x[i] - sim.px[i]
+        dy = sim.y[i] - sim.py[i]
+        rad[a] = box_radius(0.5 * sim.length[i], 0.5 * sim.width[i]) + sqrt(dx * dx + dy * dy)
+    for k in range(S):
+        i = w * S + k
+        rad[n + k] = box_radius(0.5 * sim.st_len[i], 0.5 * sim.st_wid[i])
+    for k in range(P):
+        i = w * P + k
+        dx = sim.ped_x[i] - sim.ped_px[i]
+        dy = sim.ped_y[i] - sim.ped_py[i]
+        rad[n + S + k] = box_radius(0.5 * sim.ped_len[i], 0.5 * sim.ped_wid[i]) + sqrt(dx * dx + dy * dy)

@@ -131,31 +131,39 @@ cdef inline void swap_cand(float* d, int32_t* idx, int a, int b) noexcept nogil:
     idx[a] = idx[b]; idx[b] = ti
 
 
-cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, float dmax) noexcept nogil:
-    """Same result set as select_nearest for values in [0, dmax], in two linear passes: a
+cdef inline int bin64(float v, float dmin, float inv) noexcept nogil:
+    """Bin in [0, 63] of v in [dmin, dmin + 64 / inv] (clamped in float: no int overflow)."""
+    v = (v - dmin) * inv
+    if not v > 0.0:
+        return 0
+    return <int>v if v < 63.0 else 63
+
+
+cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, float dmin,
+                                       float dmax) noexcept nogil:
+    """Same result set as select_nearest for values in [dmin, dmax], in two linear passes: a
     64-bin histogram finds the bin holding the k-th value, entries of lower bins move to the
     front, and quickselect runs only on the boundary bin (robust O(n), no bad pivots)."""
     cdef int counts[64]
     cdef int b, t, m = 0, p, cum = 0, kb
-    cdef float inv = 64.0 / dmax if dmax > 0.0 else 0.0
+    cdef float inv = 64.0 / (dmax - dmin) if dmax > dmin else 0.0
     if k >= n or k <= 0:
         return
     for b in range(64):
         counts[b] = 0
     for t in range(n):
-        b = min(<int>(d[t] * inv), 63)
-        counts[b] += 1
+        counts[bin64(d[t], dmin, inv)] += 1
     kb = 0
     while kb < 63 and cum + counts[kb] < k:
         cum += counts[kb]
         kb += 1
     for t in range(n):
-        if <int>(d[t] * inv) < kb:
+        if bin64(d[t], dmin, inv) < kb:
             swap_cand(d, idx, t, m)
             m += 1
     p = m
     for t in range(m, n):
-        if min(<int>(d[t] * inv), 63) == kb:
+        if bin64(d[t], dmin, inv) == kb:
             swap_cand(d, idx, t, p)
             p += 1
     select_nearest(d + m, idx + m, p - m, k - m)

@@ -4,30 +4,39 @@ buffer-wide clearing). Layout and feature names: selfplaydrive/sim/layout.py. Ev
 scaled and clipped to [-1, 1]; positions and directions are in the ego frame (x forward,
 y left)."""
 
-from libc.stdint cimport int32_t, int64_t
+from libc.stdint cimport int8_t, int32_t, int64_t
+from libc.string cimport memset
 from selfplaydrive._sim.common cimport (Sim, Params, Atlas, EGO_DIM, OBJ_DIM, ROAD_DIM,
                                         NUM_COEFFS, SEG_LIGHT)
 from selfplaydrive._sim.geometry cimport select_nearest
 
 
+cdef extern from "rows.h" nogil:
+    float spd_clip(float v)
+    void spd_road_row(float* r, const float* rec, float x, float y, float c, float s,
+                      float cp, float sp)
+    void spd_object_row(float* r, const float* rec, float x, float y, float c, float s,
+                        float cp, float sp, float cv, float sv)
+
+
 cdef inline float clip(float v) noexcept nogil:
-    if v > 1.0:
-        return 1.0
-    if v < -1.0:
-        return -1.0
-    return v
+    """v clipped to [-1, 1] in float (branch-free minss / maxss)."""
+    return spd_clip(v)
 
 
 cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
     """Write the observation row of every active agent of world `w`."""
-    cdef int a, i
+    cdef int a, i, nb
     cdef float* row
+    cdef float* table = sim.cand_d + <int64_t>w * sim.cand_cap
+    cdef int32_t* owner = sim.cand + <int64_t>w * sim.cand_cap
+    nb = body_table(sim, prm, w, table, owner)
     for a in range(sim.A):
         i = w * sim.A + a
         if sim.active[i]:
             row = &sim.obs[<int64_t>i * sim.obs_dim]
             write_ego(sim, prm, i, row)
-            write_objects(sim, prm, w, i, row + EGO_DIM)
+            write_objects(sim, prm, w, i, a, table, owner, nb, row + EGO_DIM)
             write_road(sim, atlas, prm, w, i, row + EGO_DIM + sim.max_obj * OBJ_DIM)
 
 
@@ -59,109 +68,96 @@ cdef inline void ego_xy(Sim* sim, int i, int k, float c, float s, float* dx, flo
     dy[0] = -s * ux + c * uy
 
 
-cdef void write_objects(Sim* sim, const Params* prm, int w, int i, float* o) noexcept nogil:
-    """The `max_obj` nearest bodies within obs_radius: other agents (active or obstacles),
-    static vehicles and pedestrians, class not observed (section 2.5)."""
-    cdef int32_t* cand = sim.cand + <int64_t>w * sim.cand_cap
-    cdef float* cd = sim.cand_d + <int64_t>w * sim.cand_cap
-    cdef int n = 0, k, j, code, A = sim.A, S = sim.S
-    cdef float x = sim.x[i], y = sim.y[i], R2 = prm.obs_radius * prm.obs_radius, dx, dy, d2
+cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner) noexcept nogil:
+    """Pack the observable bodies of world `w` once per step: agents (active or obstacles),
+    static vehicles, present pedestrians, in slot order, as 8-float records (x, y, cos, sin,
+    vx, vy, length and width scaled and clipped; rows.h) in `t`; owner[k] is the agent slot
+    of record k (-1 for other bodies). Returns the number of records. The scratch holds
+    10 (A + S + P) floats and ints (sim/buffers.py `Dims.of`)."""
+    cdef int k, j, nb = 0, A = sim.A, S = sim.S, P = sim.P
+    cdef float* r
     for k in range(A):
         j = w * A + k
-        if j != i and (sim.active[j] or sim.obstacle[j]):
-            dx = sim.x[j] - x
-            dy = sim.y[j] - y
-            d2 = dx * dx + dy * dy
-            if d2 <= R2:
-                cand[n] = k
-                cd[n] = d2
-                n += 1
+        if sim.active[j] or sim.obstacle[j]:
+            r = t + 8 * nb
+            r[0] = sim.x[j]; r[1] = sim.y[j]; r[2] = sim.hcos[j]; r[3] = sim.hsin[j]
+            r[4] = sim.speed[j] * sim.hcos[j]; r[5] = sim.speed[j] * sim.hsin[j]
+            r[6] = clip(sim.length[j] / prm.length_scale); r[7] = clip(sim.width[j] / prm.width_scale)
+            owner[nb] = k
+            nb += 1
     for k in range(S):
         j = w * S + k
         if sim.st_valid[j]:
-            dx = sim.st_x[j] - x
-            dy = sim.st_y[j] - y
-            d2 = dx * dx + dy * dy
-            if d2 <= R2:
-                cand[n] = A + k
-                cd[n] = d2
-                n += 1
-    for k in range(sim.P):
-        j = w * sim.P + k
+            r = t + 8 * nb
+            r[0] = sim.st_x[j]; r[1] = sim.st_y[j]; r[2] = sim.st_cos[j]; r[3] = sim.st_sin[j]
+            r[4] = 0.0; r[5] = 0.0
+            r[6] = clip(sim.st_len[j] / prm.length_scale); r[7] = clip(sim.st_wid[j] / prm.width_scale)
+            owner[nb] = -1
+            nb += 1
+    for k in range(P):
+        j = w * P + k
         if sim.ped_valid[j] and sim.ped_here[j]:
-            dx = sim.ped_x[j] - x
-            dy = sim.ped_y[j] - y
-            d2 = dx * dx + dy * dy
-            if d2 <= R2:
-                cand[n] = A + S + k
-                cd[n] = d2
-                n += 1
+            r = t + 8 * nb
+            r[0] = sim.ped_x[j]; r[1] = sim.ped_y[j]; r[2] = sim.ped_cos[j]; r[3] = sim.ped_sin[j]
+            r[4] = sim.ped_vx[j]; r[5] = sim.ped_vy[j]
+            r[6] = clip(sim.ped_len[j] / prm.length_scale); r[7] = clip(sim.ped_wid[j] / prm.width_scale)
+            owner[nb] = -1
+            nb += 1
+    return nb
+
+
+cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int a, const float* table,
+                        const int32_t* owner, int nb, float* o) noexcept nogil:
+    """The `max_obj` nearest bodies within obs_radius (class not observed, section 2.5), from
+    the world's body table; ties in distance go to the lower table index (slot order)."""
+    cdef int NB = sim.A + sim.S + sim.P
+    cdef float* cd = <float*>table + 8 * NB        # scratch after the table
+    cdef int32_t* cand = <int32_t*>owner + NB
+    cdef int n = 0, k
+    cdef float x = sim.x[i], y = sim.y[i], R2 = prm.obs_radius * prm.obs_radius, dx, dy, d2
+    cdef float c = sim.hcos[i], s = sim.hsin[i]
+    cdef float cp = c * prm.inv_pos_scale, sp = s * prm.inv_pos_scale
+    cdef float cv = c * prm.inv_max_speed, sv = s * prm.inv_max_speed
+    for k in range(nb):
+        dx = table[8 * k] - x
+        dy = table[8 * k + 1] - y
+        d2 = dx * dx + dy * dy
+        if d2 <= R2 and owner[k] != a:
+            cand[n] = k
+            cd[n] = d2
+            n += 1
     if n > sim.max_obj:
         select_nearest(cd, cand, n, sim.max_obj)
         n = sim.max_obj
     for k in range(n):
-        object_row(sim, prm, w, i, cand[k], o + k * OBJ_DIM)
-    for k in range(n * OBJ_DIM, sim.max_obj * OBJ_DIM):
-        o[k] = 0.0
-
-
-cdef void object_row(Sim* sim, const Params* prm, int w, int i, int code, float* o) noexcept nogil:
-    cdef float ox, oy, oc, os, ln, wd, vx, vy, c = sim.hcos[i], s = sim.hsin[i], ux, uy
-    cdef int j
-    if code < sim.A:
-        j = w * sim.A + code
-        ox = sim.x[j]; oy = sim.y[j]; oc = sim.hcos[j]; os = sim.hsin[j]
-        ln = sim.length[j]; wd = sim.width[j]
-        vx = sim.speed[j] * oc; vy = sim.speed[j] * os
-    elif code < sim.A + sim.S:
-        j = w * sim.S + code - sim.A
-        ox = sim.st_x[j]; oy = sim.st_y[j]; oc = sim.st_cos[j]; os = sim.st_sin[j]
-        ln = sim.st_len[j]; wd = sim.st_wid[j]
-        vx = 0.0; vy = 0.0
-    else:
-        j = w * sim.P + code - sim.A - sim.S
-        ox = sim.ped_x[j]; oy = sim.ped_y[j]; oc = sim.ped_cos[j]; os = sim.ped_sin[j]
-        ln = sim.ped_len[j]; wd = sim.ped_wid[j]
-        vx = sim.ped_vx[j]; vy = sim.ped_vy[j]
-    ux = ox - sim.x[i]
-    uy = oy - sim.y[i]
-    o[0] = 1.0
-    o[1] = clip((c * ux + s * uy) / prm.pos_scale)
-    o[2] = clip((-s * ux + c * uy) / prm.pos_scale)
-    o[3] = clip(oc * c + os * s)    # cos of the relative heading (clip: float rounding)
-    o[4] = clip(os * c - oc * s)    # sin of the relative heading
-    o[5] = clip(ln / prm.length_scale)
-    o[6] = clip(wd / prm.width_scale)
-    o[7] = clip((c * vx + s * vy) / prm.max_speed)
-    o[8] = clip((-s * vx + c * vy) / prm.max_speed)
+        spd_object_row(o + k * OBJ_DIM, table + 8 * cand[k], x, y, c, s, cp, sp, cv, sv)
+    memset(o + n * OBJ_DIM, 0, (sim.max_obj - n) * OBJ_DIM * sizeof(float))
 
 
 cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i, float* o) noexcept nogil:
-    """The segments chosen by the events gather (road_idx): midpoint, direction (cos, sin, no
-    trig: the directions are precomputed), length, type and traffic-light state."""
-    cdef int n = sim.road_n[i], k, sg, g
-    cdef const int32_t* idx = &sim.road_idx[<int64_t>i * sim.max_road]
-    cdef float c = sim.hcos[i], s = sim.hsin[i], ux, uy, dx, dy, st
-    cdef float* r
+    """The segments chosen by the events gather: midpoint, direction (cos, sin, no trig: the
+    directions are precomputed), length, type and traffic-light state, from the packed atlas
+    record of each segment. The gather leaves atlas positions in road_idx; they are replaced
+    here by global segment indices."""
+    cdef int n = sim.road_n[i], k, g, G = sim.G
+    cdef int32_t* idx = &sim.road_idx[<int64_t>i * sim.max_road]
+    cdef float x = sim.x[i], y = sim.y[i]
+    # the position scale folded into the rotation: one multiply per coordinate
+    cdef float c = sim.hcos[i], s = sim.hsin[i], cp = c * prm.inv_pos_scale, sp = s * prm.inv_pos_scale
+    cdef float third = <float>(1.0 / 3.0)
+    cdef const int8_t* gstate = &sim.light_state[w * G]
+    # locals, not struct fields: the module is built with -fno-strict-aliasing, so every
+    # store below would otherwise force the compiler to reload them
+    cdef const float* recs = atlas.seg_rec
+    cdef const float* rec
+    cdef float* r = o
     for k in range(n):
-        sg = idx[k]
-        r = o + k * ROAD_DIM
-        ux = atlas.seg_mid[2 * sg] - sim.x[i]
-        uy = atlas.seg_mid[2 * sg + 1] - sim.y[i]
-        dx = atlas.seg_dir[2 * sg]
-        dy = atlas.seg_dir[2 * sg + 1]
-        st = 0.0
-        if atlas.seg_type[sg] == SEG_LIGHT:
-            g = atlas.seg_group[sg]
-            if g >= 0 and g < sim.G:
-                st = sim.light_state[w * sim.G + g] / 3.0
-        r[0] = 1.0
-        r[1] = clip((c * ux + s * uy) / prm.pos_scale)
-        r[2] = clip((-s * ux + c * uy) / prm.pos_scale)
-        r[3] = clip(dx * c + dy * s)
-        r[4] = clip(dy * c - dx * s)
-        r[5] = clip(atlas.seg_len[sg] / prm.length_scale)
-        r[6] = atlas.seg_type[sg] / 4.0
-        r[7] = st
-    for k in range(n * ROAD_DIM, sim.max_road * ROAD_DIM):
-        o[k] = 0.0
+        rec = recs + 8 * idx[k]
+        spd_road_row(r, rec, x, y, c, s, cp, sp)
+        idx[k] = (<const int32_t*>rec)[7]
+        if rec[6] >= 0.0:
+            g = <int>rec[6]
+            if g < G:
+                r[7] = gstate[g] * third
+        r += ROAD_DIM
+    memset(o + n * ROAD_DIM, 0, (sim.max_road - n) * ROAD_DIM * sizeof(float))

@@ -11,14 +11,19 @@ entering a turn too fast follows a larger radius (understeer). Speeds are clampe
 """
 
 from libc.math cimport sqrt, tan, sin, cos, fabs
-from selfplaydrive._sim.common cimport (Sim, Params, PHYS_FRICTION, H_FRICTION, H_ACCEL_GAIN,
-                                        H_STEER_GAIN)
+from selfplaydrive._sim.common cimport (Sim, Params, PHYS_FRICTION, PHYS_EXTERNAL, H_FRICTION,
+                                        H_ACCEL_GAIN, H_STEER_GAIN)
 from selfplaydrive._sim.geometry cimport wrap_angle
 
 
 cdef void physics_world(Sim* sim, const Params* prm, int w) noexcept nogil:
     """Advance every active agent of world `w` by one step `prm.dt` from its action."""
     cdef int a, i
+    if prm.physics == PHYS_EXTERNAL:
+        # a Python model already moved the vehicles and set px, py, pheading, a_long, a_lat
+        for a in range(sim.A):
+            sim.events[w * sim.A + a] = 0
+        return
     for a in range(sim.A):
         i = w * sim.A + a
         sim.px[i] = sim.x[i]

@@ -1,7 +1,7 @@
 # cython: language_level=3
 """`World`: binds the env's NumPy buffers to the C structs and runs the step chain over all
-worlds in parallel (OpenMP `prange`, one world per iteration, static schedule). Worlds never
-share mutable state, so results do not depend on the number of threads."""
+worlds in parallel (OpenMP `prange`, one world per iteration, one parallel region per step).
+Worlds never share mutable state, so results do not depend on the number of threads."""
 
 import time
 
@@ -12,7 +12,8 @@ from cython.parallel cimport prange
 from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t
 from selfplaydrive._sim.common cimport Sim, Params, Atlas
 from selfplaydrive._sim.physics cimport physics_world
-from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world, road_world
+from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world
+from selfplaydrive._sim.road cimport road_world
 from selfplaydrive._sim.reward cimport reward_world, finalize_world
 from selfplaydrive._sim.observe cimport observe_world
 
@@ -51,6 +52,8 @@ cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noex
     for k in range(w * sim.P, (w + 1) * sim.P):
         sim.ped_px[k] = sim.ped_x[k]
         sim.ped_py[k] = sim.ped_y[k]
+    for a in range(sim.A):
+        sim.road_r[w * sim.A + a] = -1.0  # new positions: the road gather starts without a hint
     road_world(sim, atlas, prm, w)
     for a in range(sim.A):
         i = w * sim.A + a
@@ -108,6 +111,8 @@ cdef class World:
         self.sim.lane_valid = <uint8_t*>ptr(s, "lane_valid", u1, k)
         self.sim.events = <uint8_t*>ptr(s, "events", u1, k); self.sim.ever = <uint8_t*>ptr(s, "ever", u1, k)
         self.sim.road_idx = <int32_t*>ptr(s, "road_idx", i4, k); self.sim.road_n = <int32_t*>ptr(s, "road_n", i4, k)
+        self.sim.road_r = <float*>ptr(s, "road_r", f4, k)
+        self.sim.road_x = <float*>ptr(s, "road_x", f4, k); self.sim.road_y = <float*>ptr(s, "road_y", f4, k)
         self.sim.act_i = <int32_t*>ptr(s, "act_i", i4, k); self.sim.act_f = <float*>ptr(s, "act_f", f4, k)
         self.sim.reward = <float*>ptr(s, "reward", f4, k); self.sim.terms = <float*>ptr(s, "terms", f4, k)
         self.sim.term = <uint8_t*>ptr(s, "term", u1, k); self.sim.trunc = <uint8_t*>ptr(s, "trunc", u1, k)
@@ -146,11 +151,13 @@ cdef class World:
         self.atlas.seg_mid = <float*>ptr(a, "seg_mid", f4, k); self.atlas.seg_dir = <float*>ptr(a, "seg_dir", f4, k)
         self.atlas.seg_len = <float*>ptr(a, "seg_len", f4, k); self.atlas.seg_type = <int8_t*>ptr(a, "seg_type", i1, k)
         self.atlas.seg_group = <int32_t*>ptr(a, "seg_group", i4, k)
+        self.atlas.seg_mx = <float*>ptr(a, "seg_mx", f4, k); self.atlas.seg_my = <float*>ptr(a, "seg_my", f4, k)
+        self.atlas.seg_rec = <float*>ptr(a, "seg_rec", f4, k)
+        self.atlas.seg_id = <int32_t*>ptr(a, "seg_id", i4, k); self.atlas.seg_pos = <int32_t*>ptr(a, "seg_pos", i4, k)
         self.atlas.grid_origin = <float*>ptr(a, "grid_origin", f4, k); self.atlas.grid_cell = <float*>ptr(a, "grid_cell", f4, k)
         self.atlas.grid_nx = <int32_t*>ptr(a, "grid_nx", i4, k); self.atlas.grid_ny = <int32_t*>ptr(a, "grid_ny", i4, k)
         self.atlas.cell_base = <int64_t*>ptr(a, "cell_base", i8, k)
         self.atlas.cell_offsets = <int32_t*>ptr(a, "cell_offsets", i4, k)
-        self.atlas.cell_items = <int32_t*>ptr(a, "cell_items", i4, k)
         self.atlas.max_seg_len = <float*>ptr(a, "max_seg_len", f4, k)
 
     def _bind_params(self, dict p):
@@ -170,6 +177,11 @@ cdef class World:
         self.prm.lateral_scale = p["lateral_scale"]
         self.prm.coeff_scale = <float*>ptr(p, "coeff_scale", np.float32, k)
         self.prm.max_substeps = p["max_substeps"]
+        self.prm.inv_pos_scale = 1.0 / self.prm.pos_scale; self.prm.inv_wp_scale = 1.0 / self.prm.wp_scale
+        self.prm.inv_length_scale = 1.0 / self.prm.length_scale
+        self.prm.inv_width_scale = 1.0 / self.prm.width_scale
+        self.prm.inv_lateral_scale = 1.0 / self.prm.lateral_scale
+        self.prm.inv_max_speed = 1.0 / self.prm.max_speed
 
     def step(self, int num_threads=1, bint profile=False):
         """Advance every world one step; with `profile`, stage by stage with timings."""
@@ -178,7 +190,10 @@ cdef class World:
             self._step_profiled(num_threads)
             return
         with nogil:
-            for w in prange(W, num_threads=num_threads, schedule="static"):
+            # one parallel region per step; worlds handed out one at a time, so a thread that
+            # the OS deschedules (shared machine) does not hold the others back. Results do
+            # not depend on which thread steps a world.
+            for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=1):
                 step_one(&self.sim, &self.atlas, &self.prm, w)
 
     def _step_profiled(self, int num_threads):

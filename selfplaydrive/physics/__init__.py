@@ -2,5 +2,6 @@
 construction; the step never branches on a Python object."""
 
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
+from selfplaydrive.physics.pymunk_model import PymunkModel
 
-__all__ = ["BicycleModel", "FrictionBicycleModel"]
+__all__ = ["BicycleModel", "FrictionBicycleModel", "PymunkModel"]

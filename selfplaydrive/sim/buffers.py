@@ -44,7 +44,8 @@ class Dims:
             G=G,
             max_obj=max_obj,
             max_road=max_road,
-            cand_cap=max(cand_cap, len(sc.agent_valid) + len(sc.static_valid) + len(sc.ped_valid)),
+            # the observation stage keeps a body table (8 floats) and candidates in the scratch
+            cand_cap=max(cand_cap, 10 * (len(sc.agent_valid) + len(sc.static_valid) + len(sc.ped_valid))),
             obs_dim=obs_dim,
         )
 
@@ -54,7 +55,8 @@ def allocate(d: Dims) -> dict[str, np.ndarray]:
     N, f4, u1, i4 = d.W * d.A, np.float32, np.uint8, np.int32
     shapes: dict[str, tuple[tuple[int, ...], type]] = {}
     for name in (
-        "x y heading hcos hsin speed px py pheading length width a_long a_lat lane_s lane_alpha reward"
+        "x y heading hcos hsin speed px py pheading length width a_long a_lat lane_s lane_alpha reward "
+        "road_r road_x road_y"
     ).split():
         shapes[name] = ((N,), f4)
     for name in "num_wp wp_idx road_n".split():
@@ -97,7 +99,9 @@ def allocate(d: Dims) -> dict[str, np.ndarray]:
         "ped_speed ped_start ped_len ped_wid ped_x ped_y ped_px ped_py ped_cos ped_sin ped_vx ped_vy".split()
     ):
         shapes[name] = ((d.W * d.P,), f4)
-    return {name: np.zeros(shape, dtype=dtype) for name, (shape, dtype) in shapes.items()}
+    b = {name: np.zeros(shape, dtype=dtype) for name, (shape, dtype) in shapes.items()}
+    b["road_r"][:] = -1.0  # no road gather yet: the first one searches without a hint
+    return b
 
 
 def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:

@@ -55,7 +55,8 @@ class VecEnv:
         maps: One `RoadMap` or a sequence; worlds draw a map uniformly from their own generator.
         spawner: Object with `sample(road_map, rng, map_index=0) -> Scenario`.
         num_worlds: Worlds stepped together.
-        physics: A physics model (default `FrictionBicycleModel()`, section 2.6).
+        physics: A physics model (default `FrictionBicycleModel()`, section 2.6); `PymunkModel()`
+            steps rigid bodies in Python before the kernels (ablations, slow).
         actions: `DiscreteActions()` (default, section 2.4) or `ContinuousActions()`.
         params: `SimParams` (default: the paper's constants).
         obs: `ObsConfig` (63 objects, 200 road segments within 100 m).
@@ -99,6 +100,7 @@ class VecEnv:
         self.spawner = spawner
         self.num_worlds = int(num_worlds)
         self.physics = physics if physics is not None else FrictionBicycleModel()
+        self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
         self.obs_config = (
@@ -129,7 +131,7 @@ class VecEnv:
             self.layout.obs_dim,
         )
         self.buffers = allocate(self.dims)
-        self.atlas = build_atlas(self.maps)
+        self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
         self._world = World(self.dims.__dict__, self.buffers, self.atlas, self._kernel_params())
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
@@ -213,15 +215,29 @@ class VecEnv:
         a = self.action_table.validate(actions, self.num_agents)
         np.copyto(self.buffers["act_i" if self.action_table.discrete else "act_f"], a)
         np.copyto(self.reward_mask, self.masks)
+        if self._external_physics:
+            self._step_external_physics(a)
         self._world.step(self.num_threads, self.profile)
-        self._run_reward_hooks()
-        ended = self.terminations | self.truncations
-        self._run_obs_hooks(ended)
+        if self.reward_hooks:
+            self._run_reward_hooks()
+        if self.obs_hooks:
+            self._run_obs_hooks(self.terminations | self.truncations)
+        if not self.buffers["done"].any():
+            return  # no per-world Python work on the common path
         done = np.flatnonzero(self.buffers["done"]).astype(np.int32)
         if len(done):
             self._record_episodes(done)
             self._reset_worlds(done)
             self._run_obs_hooks(None)
+
+    def _step_external_physics(self, a: np.ndarray) -> None:
+        """Dynamics stepped in Python (e.g. `PymunkModel`) before the kernels, which skip theirs."""
+        t = self.action_table
+        if t.discrete:
+            accel, steer = t.accel[a[:, 0]], t.steer[a[:, 1]]
+        else:
+            accel, steer = a[:, 0], a[:, 1]
+        self.physics.step(self.buffers, self.params.dt, accel, steer)
 
     def _reset_worlds(self, worlds: np.ndarray, first=None) -> None:
         import time

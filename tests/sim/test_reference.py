@@ -179,3 +179,73 @@ def test_observation_matches_reference(cmap):
         assert np.all(gr[gr[:, 0] == 0] == 0.0)
         n += 1
     assert n > 5
+
+
+@pytest.mark.parametrize("max_objects, max_road, radius", [(3, 12, 100.0), (5, 40, 30.0)])
+def test_nearest_selection_matches_reference_when_it_binds(cmap, max_objects, max_road, radius):
+    """Few observed slots, so the partial selections (road shells with the distance bound of
+    the previous step, object quickselect) decide which rows appear, over 25 steps."""
+    from selfplaydrive.obs.config import ObsConfig
+
+    env = random_env(cmap, FrictionBicycleModel(), 5, obs=ObsConfig(max_objects, max_road, radius))
+    rng = np.random.default_rng(4)
+    b, L = env.buffers, env.layout
+    bound = 0
+    for _ in range(25):
+        env.step(rng.integers(0, [7, 13], size=(env.num_agents, 2)))
+        obs = L.split(env.observations)
+        ended = (env.terminations | env.truncations).reshape(env.num_worlds, -1).any(axis=1)
+        for i in np.flatnonzero(env.masks):
+            w = i // env.dims.A
+            if ended[w]:
+                continue  # agents that ended this step were still observed in it
+            road = ref.road_rows(
+                cmap,
+                b["light_state"][w * env.dims.G : (w + 1) * env.dims.G],
+                float(b["x"][i]),
+                float(b["y"][i]),
+                float(b["heading"][i]),
+                radius=radius,
+                max_road=max_road,
+            )
+            gr = obs["road"][i]
+            assert int(gr[:, 0].sum()) == len(road)
+            np.testing.assert_allclose(_sorted_rows(gr[gr[:, 0] > 0]), _sorted_rows(road), atol=2e-5)
+            assert b["road_n"][i] == len(road)
+            bound += len(road) == max_road
+            objs = ref.object_rows(b, env.dims, i, radius=radius)
+            near = objs[np.argsort(objs[:, 1] ** 2 + objs[:, 2] ** 2, kind="stable")][:max_objects]
+            got = obs["objects"][i]
+            np.testing.assert_allclose(_sorted_rows(got[got[:, 0] > 0]), _sorted_rows(near), atol=2e-5)
+    assert bound > 20  # the road selection was binding often
+
+
+def test_road_selection_exact_after_teleport(cmap):
+    """Positions written from outside (log replay does this) move an agent farther than one
+    step: the distance bound is taken from the last gather's position, so rows stay exact."""
+    from selfplaydrive.obs.config import ObsConfig
+
+    env = random_env(cmap, BicycleModel(), 8, obs=ObsConfig(4, 10, 100.0))
+    b, L = env.buffers, env.layout
+    zero = np.tile(np.array([3, 6]), (env.num_agents, 1))
+    env.step(zero)
+    live = np.flatnonzero(env.masks)
+    b["x"][live] += 60.0  # far beyond the shell of the previous bound
+    env.step(zero)
+    checked = 0
+    for i in np.flatnonzero(env.masks):
+        w = i // env.dims.A
+        if b["step"][w] != 2:
+            continue  # world was reset in between
+        road = ref.road_rows(
+            cmap,
+            b["light_state"][w * env.dims.G : (w + 1) * env.dims.G],
+            float(b["x"][i]),
+            float(b["y"][i]),
+            float(b["heading"][i]),
+            max_road=10,
+        )
+        gr = L.split(env.observations)["road"][i]
+        np.testing.assert_allclose(_sorted_rows(gr[gr[:, 0] > 0]), _sorted_rows(road), atol=2e-5)
+        checked += 1
+    assert checked > 3
