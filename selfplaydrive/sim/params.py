@@ -1,7 +1,7 @@
 """`SimParams`: every constant of the simulator, with units (docs/world.md lists them).
 
-Defaults follow the paper (section 2): dt = 0.1 s, comfort limit 3 m/s^2, observation radius
-100 m with 63 objects and 200 road segments, traffic-light states lasting U(0.5, 10) s.
+Defaults follow the paper (section 2): dt = 0.1 s, comfort limit 3 m/s^2, traffic-light
+states lasting U(0.5, 10) s. Observation sizes live in `ObsConfig` (one source of truth).
 """
 
 from __future__ import annotations
@@ -24,9 +24,6 @@ class SimParams:
     Attributes:
         dt: Step length [s].
         comfort_limit: Comfort threshold on |a_long| and |a_lat| [m/s^2].
-        obs_radius: Objects and road segments are observed within this radius [m].
-        max_objects: Observed objects per agent.
-        max_road: Observed road segments per agent.
         lane_radius: Lane association looks for centerlines within this distance [m].
         terminate_threshold: C_collision / C_offroad at or above which the event ends the agent.
         waypoint_reward: Reward per reached waypoint.
@@ -46,9 +43,6 @@ class SimParams:
 
     dt: float = 0.1
     comfort_limit: float = 3.0
-    obs_radius: float = 100.0
-    max_objects: int = 63
-    max_road: int = 200
     lane_radius: float = 5.0
     terminate_threshold: float = 0.5
     waypoint_reward: float = 0.25
@@ -69,7 +63,6 @@ class SimParams:
         positive = (
             "dt",
             "comfort_limit",
-            "obs_radius",
             "lane_radius",
             "wp_scale",
             "length_scale",
@@ -80,7 +73,7 @@ class SimParams:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"sim.{name}: expected a positive finite number, got {v!r}")
-        for name in ("max_objects", "max_road", "max_substeps", "cand_cap"):
+        for name in ("max_substeps", "cand_cap"):
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f"sim.{name}: expected an integer >= 1, got {getattr(self, name)!r}")
         if not 0 < self.light_min <= self.light_max:
@@ -98,7 +91,6 @@ class SimParams:
         return {
             "dt": d["dt"],
             "comfort_limit": d["comfort_limit"],
-            "obs_radius": d["obs_radius"],
             "lane_radius": d["lane_radius"],
             "terminate_threshold": d["terminate_threshold"],
             "waypoint_reward": d["waypoint_reward"],
@@ -108,7 +100,6 @@ class SimParams:
             "light_min": d["light_min"],
             "light_max": d["light_max"],
             "ped_vanish": int(self.pedestrian_end == "vanish"),
-            "pos_scale": d["obs_radius"],
             "wp_scale": d["wp_scale"],
             "length_scale": d["length_scale"],
             "width_scale": d["width_scale"],

@@ -103,11 +103,7 @@ class VecEnv:
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
-        self.obs_config = (
-            obs
-            if obs is not None
-            else ObsConfig(self.params.max_objects, self.params.max_road, self.params.obs_radius)
-        )
+        self.obs_config = obs if obs is not None else ObsConfig()
         self.num_threads = _threads(num_threads)
         self.terminated_vehicle = terminated_vehicle
         self.reward_hooks = list(reward_hooks)
