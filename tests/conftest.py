@@ -2,23 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from sharedmaps import SHARED_MAPS, shared_map  # noqa: F401  (re-exported for fixtures)
 
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, compile_map
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED_MAPS = REPO.parent / "shared" / "maps"
-
-
-def shared_map(rel: str) -> Path:
-    """Path of a file under ../shared/maps, or skip the test with a reason."""
-    path = SHARED_MAPS / rel
-    if not path.exists():
-        pytest.skip(f"{path} not present: ../shared/maps is only available in the project's CI")
-    return path
 
 
 @pytest.fixture

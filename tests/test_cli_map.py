@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import shared_map
+from sharedmaps import shared_map
 
 from selfplaydrive.cli import MAP_INFO_KEYS, main
 from selfplaydrive.maps import (

@@ -63,7 +63,7 @@ def test_map_options_instantiate():
 
 
 def test_tartu_map_option(monkeypatch):
-    from conftest import shared_map
+    from sharedmaps import shared_map
 
     path = shared_map("tartu_lanelet2/tartu_demo_l.osm")
     monkeypatch.setenv("SELFPLAYDRIVE_SHARED_MAPS", str(path.parents[1]))
@@ -107,3 +107,13 @@ def test_sweep_syntax_reaches_the_sampler():
     assert lo.collision == (0.0, 0.5) and hi.collision == (0.0, 1.0)
     spawner = instantiate(compose("sim", ["reward.collision.high=0.5"]).spawner)
     assert spawner.conditioning.collision == (0.0, 0.5)
+
+
+def test_component_catalogue_is_current():
+    """docs/components.md is generated from the shipped configs; regenerate it when they change."""
+    from pathlib import Path
+
+    from selfplaydrive.catalogue import catalogue
+
+    page = Path(__file__).resolve().parents[1] / "docs" / "components.md"
+    assert page.read_text() == catalogue(), "run: python -m selfplaydrive.catalogue > docs/components.md"

@@ -9,6 +9,7 @@ from collections import deque
 
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.drivers import RuleBasedDriver
 from selfplaydrive.eval.suites import (
@@ -29,7 +30,6 @@ from selfplaydrive.maps.roadmap import SegmentType
 from selfplaydrive.sim.actions import ContinuousActions
 from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.vec_env import VecEnv
-from tests.conftest import shared_map
 
 
 @pytest.fixture(scope="module")

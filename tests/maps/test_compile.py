@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from selfplaydrive._sim.spatial import query_radius_batch
+
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps import LaneElement, MapElements, SegmentType, compile_map
 from selfplaydrive.maps.compile import cut_polyline
@@ -36,7 +36,8 @@ def test_lane_km_and_origin(straight_map):
 
 def test_grid_query_matches_brute_force(straight_map):
     rng = np.random.default_rng(0)
-    q = rng.uniform(straight_map.bounds[:2] - 20, straight_map.bounds[2:] + 20, size=(50, 2)).astype(np.float32)
+    lo, hi = straight_map.bounds[:2] - 20, straight_map.bounds[2:] + 20
+    q = rng.uniform(lo, hi, size=(50, 2)).astype(np.float32)
     counts, idx = query_radius_batch(straight_map, q, 30.0)
     mid = straight_map.segments.mid
     for i, p in enumerate(q):

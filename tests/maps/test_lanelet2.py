@@ -7,6 +7,7 @@ import time
 import hydra.utils
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import ConfigError, MapError
 from selfplaydrive.maps import EdgeKind, LaneKind, StopKind, compile_map
@@ -15,7 +16,6 @@ from selfplaydrive.maps.lanelet2_geometry import align_bounds, centerline_and_wi
 from selfplaydrive.maps.lanelet2_rules import LaneChange, can_cross, line_lane_change, parse_speed
 from selfplaydrive.maps.projection import LocalTransverseMercator, lest97
 from selfplaydrive.maps.routing import largest_scc_share
-from tests.conftest import shared_map
 
 # ---------------------------------------------------------------- a hand-built map
 # Three lanes eastwards between y = 0 | 3 | 6 | 9 over x in [0, 100], a continuation of the

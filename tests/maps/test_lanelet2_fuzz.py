@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps import compile_map
 from selfplaydrive.maps.lanelet2 import read_lanelet2
-from tests.conftest import shared_map
 
 NUM_MUTANTS = 40  # per source map, 120 in all
 PER_FILE_LIMIT_S = 5

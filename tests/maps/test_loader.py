@@ -8,7 +8,7 @@ import types
 
 import numpy as np
 import pytest
-from conftest import shared_map
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps import LaneElement, MapElements, compile_map, loader

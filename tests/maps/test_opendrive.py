@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import ConfigError, MapError
 from selfplaydrive.maps.compile import compile_map
 from selfplaydrive.maps.elements import LaneKind, MapElements, StopKind
 from selfplaydrive.maps.opendrive import OpenDriveLoader, parse_opendrive, read_opendrive
 from selfplaydrive.maps.routing import largest_scc_share
-from tests.conftest import shared_map
 
 W = 'sOffset="0" a="{a}" b="{b}" c="0" d="0"'
 

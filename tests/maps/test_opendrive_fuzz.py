@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps.compile import compile_map
 from selfplaydrive.maps.opendrive import read_opendrive
-from tests.conftest import shared_map
 
 NUM_MUTATIONS = 120
 _NUMBER = re.compile(r'"(-?[0-9][0-9.eE+-]*)"')

@@ -6,9 +6,9 @@ import matplotlib.colors
 import matplotlib.image
 import numpy as np
 import pytest
-from conftest import shared_map
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
+from sharedmaps import shared_map
 
 from selfplaydrive.maps import LaneElement, MapElements, StopKind, StopLineElement, compile_map
 from selfplaydrive.render import draw_map, lane_polygons, render_map

@@ -348,7 +348,7 @@ def test_built_from_config_by_target(cls: type) -> None:
 @pytest.mark.shared_maps
 def test_models_drive_the_real_env() -> None:
     """End to end on Tartu: env observations in, sampled actions back into the env."""
-    from conftest import shared_map
+    from sharedmaps import shared_map
 
     from selfplaydrive.maps.loader import load_map
     from selfplaydrive.scenario.spawner import PaperSpawner

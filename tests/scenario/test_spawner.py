@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from sharedmaps import shared_map
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps import LaneElement, MapElements, compile_map
@@ -15,7 +16,6 @@ from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.pedestrians import PedestrianSampler
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
-from tests.conftest import shared_map
 
 A, S, P, K = 32, 48, 8, 8
 

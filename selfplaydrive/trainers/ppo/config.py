@@ -1,0 +1,178 @@
+"""`PPOConfig`: every hyperparameter of the library's own PPO trainer (paper section 3).
+
+The dataclass is the config schema: a Hydra `trainer/ppo.yaml` lists these keys, the builder
+passes them as keyword arguments, and nothing else reads configuration behind its back
+(DESIGN.md principle 6). `validate` runs in `__post_init__`, so a bad value fails at
+construction with the key, the value and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+from selfplaydrive.errors import ConfigError
+
+PRECISIONS = ("auto", "fp32", "bf16")
+
+
+@dataclass
+class PPOConfig:
+    """Hyperparameters of PPO-clip with GAE, recurrent (BPTT) minibatches over agent slots.
+
+    Counting: one *slot-step* is one agent slot of one world advanced by one env step, active or
+    not; a rollout holds `rollout_length * env.num_agents` slot-steps, and only the active ones
+    (the agent acted) enter the losses.
+    """
+
+    total_steps: int = 50_000_000
+    """Training budget in slot-steps; the number of updates is
+    `total_steps // (rollout_length * env.num_agents)` (at least 1)."""
+
+    rollout_length: int = 64
+    """Env steps collected per update; also the BPTT horizon of the LSTM (sequences are never
+    cut inside a rollout)."""
+
+    learning_rate: float = 3e-4
+    """Adam step size at the start of training."""
+
+    anneal_lr: bool = True
+    """Decay the learning rate linearly to 0 over the updates."""
+
+    adam_eps: float = 1e-5
+    """Adam epsilon (1e-5 rather than torch's 1e-8, as in common PPO implementations)."""
+
+    gamma: float = 0.99
+    """Discount factor per 0.1 s step (horizon about 10 s)."""
+
+    gae_lambda: float = 0.95
+    """GAE lambda: 0 is one-step TD, 1 is the Monte-Carlo return."""
+
+    num_epochs: int = 4
+    """Passes over each rollout."""
+
+    num_minibatches: int = 4
+    """Minibatches per epoch; the rollout is split over agent slots, each minibatch holding
+    whole (rollout_length,) sequences so the LSTM sees them in order."""
+
+    clip_coef: float = 0.2
+    """PPO ratio clip epsilon: the policy term uses clip(ratio, 1 - eps, 1 + eps)."""
+
+    clip_value: bool = True
+    """Also clip the value update around the rollout's value (loss = max of clipped and
+    unclipped squared errors)."""
+
+    value_clip_coef: float = 0.2
+    """Clip range of the value change when `clip_value` is set (in return units)."""
+
+    norm_adv: bool = True
+    """Normalise advantages to zero mean, unit std per minibatch (active slots only)."""
+
+    ent_coef: float = 0.005
+    """Weight of the entropy bonus (subtracted from the loss)."""
+
+    vf_coef: float = 0.5
+    """Weight of the value loss."""
+
+    max_grad_norm: float = 0.5
+    """Clip the global gradient norm to this value (<= 0 disables clipping)."""
+
+    target_kl: float | None = None
+    """Stop the epochs of an update early once the approximate KL exceeds this (None: never)."""
+
+    seed: int = 0
+    """Seed of torch (action sampling, init done by the caller) and of the env's reset; rank r
+    of a torchrun job uses `seed + r`."""
+
+    device: str = "auto"
+    """"auto" (cuda when available, else cpu), "cpu", "cuda" or "cuda:N"; under torchrun every
+    rank uses cuda:LOCAL_RANK when cuda is available."""
+
+    precision: str = "auto"
+    """Autocast dtype of forward passes: "fp32", "bf16" (torch.autocast) or "auto" (bf16 on
+    cuda, fp32 on cpu). Losses, GAE and storage stay float32."""
+
+    torch_threads: int = 0
+    """torch intra-op threads on the CPU (0 leaves torch's default)."""
+
+    deterministic: bool = False
+    """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""
+
+    log_interval: int = 1
+    """Write TensorBoard scalars every this many updates."""
+
+    checkpoint_interval: int = 50
+    """Save a checkpoint every this many updates (0: only at the end)."""
+
+    keep_checkpoints: int = 3
+    """Periodic checkpoints kept on disk (older ones are deleted; the last one always stays)."""
+
+    eval_episodes: int = 64
+    """World episodes of the final evaluation summary (0 skips it)."""
+
+    eval_max_steps: int = 5_000
+    """Cap on env steps of the final evaluation (it stops earlier when enough episodes ended)."""
+
+    eval_deterministic: bool = False
+    """Final evaluation takes the most likely action instead of sampling."""
+
+    progress_bar: bool = True
+    """Show a tqdm progress bar with SPS and ETA (rank 0 only)."""
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise ConfigError naming the key, the value and the expected range."""
+        _positive_ints(self, "total_steps", "rollout_length", "num_epochs", "num_minibatches", "log_interval")
+        _non_negative_ints(self, "checkpoint_interval", "eval_episodes", "eval_max_steps", "torch_threads")
+        if self.keep_checkpoints < 1:
+            _bad("keep_checkpoints", self.keep_checkpoints, "an int >= 1")
+        for name in ("learning_rate", "adam_eps", "clip_coef", "value_clip_coef"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                _bad(name, v, "a finite number > 0")
+        for name in ("gamma", "gae_lambda"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                _bad(name, v, "a number in [0, 1]")
+        for name in ("ent_coef", "vf_coef"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                _bad(name, getattr(self, name), "a finite number >= 0")
+        if self.target_kl is not None and not self.target_kl > 0:
+            _bad("target_kl", self.target_kl, "None or a number > 0")
+        if self.precision not in PRECISIONS:
+            _bad("precision", self.precision, f"one of {PRECISIONS}")
+        if not (self.device == "auto" or self.device == "cpu" or self.device.startswith("cuda")):
+            _bad("device", self.device, "'auto', 'cpu', 'cuda' or 'cuda:N'")
+
+    def to_dict(self) -> dict[str, object]:
+        """Plain dict of every field (for the run folder and checkpoints)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, object]) -> PPOConfig:
+        """Build from a mapping, rejecting unknown keys by name."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ConfigError(f"PPOConfig: unknown key(s) {unknown}; expected keys from {sorted(known)}")
+        return cls(**values)
+
+
+def _bad(name: str, value: object, expected: str) -> None:
+    raise ConfigError(f"PPOConfig.{name} = {value!r}: expected {expected}")
+
+
+def _positive_ints(cfg: PPOConfig, *names: str) -> None:
+    for name in names:
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            _bad(name, v, "an int >= 1")
+
+
+def _non_negative_ints(cfg: PPOConfig, *names: str) -> None:
+    for name in names:
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            _bad(name, v, "an int >= 0")

@@ -1,0 +1,368 @@
+"""`PPOTrainer`: PPO-clip on a `VecEnv`, read straight from the env's buffers (paper section 3).
+
+One update = collect `rollout_length` env steps of every agent slot of every world, compute
+GAE (bootstrapping truncated agents from V(final observation)), then `num_epochs` passes of
+`num_minibatches` minibatches of whole agent-slot sequences (truncated BPTT for the LSTM).
+Layout of the file, CleanRL style: setup, ROLLOUT, ADVANTAGES, UPDATE, bookkeeping.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import nullcontext
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from selfplaydrive.models.common import entropy, log_prob, sample_actions
+from selfplaydrive.trainers.ppo import checkpoint as ckpt
+from selfplaydrive.trainers.ppo.advantage import compute_gae
+from selfplaydrive.trainers.ppo.config import PPOConfig
+from selfplaydrive.trainers.ppo.dist import DistInfo, all_reduce_mean, init_distributed, wrap
+from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
+from selfplaydrive.trainers.ppo.logging import RunLogger
+from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
+from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
+
+
+def resolve_device(name: str, info: DistInfo) -> torch.device:
+    """ "auto" -> cuda (cuda:LOCAL_RANK under torchrun) when available, else cpu."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and info.enabled:
+        name = f"cuda:{info.local_rank}"
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise RuntimeError(f"PPOConfig.device = {name!r}, but torch sees no CUDA device")
+    return torch.device(name)
+
+
+def _index(state: State, idx: Tensor) -> State:
+    return tuple(s[idx] for s in state)
+
+
+class PPOTrainer:
+    """PPO trainer over every agent slot of a `VecEnv`.
+
+    Args:
+        env: A `selfplaydrive.sim.VecEnv` with discrete (MultiDiscrete) actions.
+        model: A `selfplaydrive.models.PolicyModel` (e.g. `DeepSetsModel`, `TransformerModel`).
+        config: Hyperparameters (`PPOConfig`).
+        run_dir: Folder for TensorBoard files and checkpoints (None: neither is written).
+
+    Raises:
+        ValueError: The env has continuous actions, or the model's action sizes do not match.
+    """
+
+    def __init__(self, env, model: nn.Module, config: PPOConfig, run_dir: str | Path | None = None) -> None:
+        if not getattr(env.action_table, "discrete", False):
+            raise ValueError("env: PPOTrainer needs DiscreteActions (MultiDiscrete); got continuous actions")
+        nvec = tuple(int(n) for n in env.action_space.nvec)
+        if tuple(model.nvec) != nvec:
+            raise ValueError(f"model.nvec = {tuple(model.nvec)}: expected the env's action sizes {nvec}")
+        self.env, self.config, self.nvec = env, config, nvec
+        self.run_dir = None if run_dir is None else Path(run_dir)
+        self.dist = init_distributed()
+        self.device = resolve_device(config.device, self.dist)
+        if config.torch_threads:
+            torch.set_num_threads(config.torch_threads)
+        if config.deterministic:
+            torch.use_deterministic_algorithms(True)
+        self.model = model.to(self.device)
+        self.evaluator = wrap(self.model, self.dist, self.device)
+        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=config.adam_eps)
+        self.amp_dtype = self._amp_dtype()
+        seed = config.seed + self.dist.rank
+        self.sample_gen = torch.Generator(device=self.device).manual_seed(seed)
+        self.shuffle_gen = torch.Generator().manual_seed(seed + 7919)
+        self.num_slots = env.num_agents
+        self.slots_per_update = config.rollout_length * self.num_slots
+        self.total_updates = max(1, config.total_steps // self.slots_per_update)
+        self.storage = RolloutStorage.allocate(
+            config.rollout_length, self.num_slots, env.layout.obs_dim, len(nvec), self.device
+        )
+        self.tracker = EpisodeTracker(env)
+        self.update_idx = 0
+        self.global_step = 0  # slot-steps collected by this rank
+        self.agent_steps = 0  # active agent-steps collected by this rank
+        self.needs_reset = True
+        self.state: State = ()
+        self.next_start = torch.ones(self.num_slots, dtype=torch.bool, device=self.device)
+        self.pinned = self.device.type == "cuda"
+        self._staging: dict[str, Tensor] = {}
+
+    # ---------------------------------------------------------------------------------------
+    # setup helpers
+    def _amp_dtype(self) -> torch.dtype | None:
+        p = self.config.precision
+        if p == "bf16" or (p == "auto" and self.device.type == "cuda"):
+            return torch.bfloat16
+        return None
+
+    def autocast(self):
+        """bf16 autocast of forward passes when configured; a no-op otherwise (CPU default)."""
+        if self.amp_dtype is None:
+            return nullcontext()
+        return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype)
+
+    def _to_device(self, array: np.ndarray, key: str) -> Tensor:
+        """Copy an env buffer to the device (a private copy: the env overwrites its buffers).
+
+        On CUDA the copy goes through a pinned staging buffer per `key` and is non-blocking;
+        reusing a staging buffer is safe because every env step synchronises once (the action
+        download) after the previous upload from it was queued."""
+        if not self.pinned:
+            return torch.from_numpy(array).to(self.device, copy=True)
+        buf = self._staging.get(key)
+        if buf is None or tuple(buf.shape) != array.shape:
+            buf = torch.from_numpy(np.empty_like(array)).pin_memory()
+            self._staging[key] = buf
+        np.copyto(buf.numpy(), array)
+        return buf.to(self.device, non_blocking=True)
+
+    def reset_env(self, seed: int) -> None:
+        """Reset the env and every slot's recurrent state (a new episode everywhere)."""
+        self.env.reset(seed=seed)
+        self.tracker.on_reset()
+        self.state = self.model.initial_state(self.num_slots, self.device)
+        self.next_start = torch.ones(self.num_slots, dtype=torch.bool, device=self.device)
+        self.needs_reset = False
+
+    # ---------------------------------------------------------------------------------------
+    # ROLLOUT: act in every slot of every world, straight from the env's buffers
+    @torch.no_grad()
+    def act(self, deterministic: bool = False) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """Policy step on the current observations; advances the recurrent state.
+
+        Returns:
+            obs (N, obs_dim), actions (N, A), log-probs (N,), values (N,), acted mask (N,).
+        """
+        obs = self._to_device(self.env.observations, "obs")
+        with self.autocast():
+            logits, value, self.state = self.model(obs, self.state, self.next_start)
+        logits = logits.float()
+        actions = sample_actions(logits, self.nvec, deterministic, generator=self.sample_gen)
+        acted = self._to_device(self.env.masks, "acted")
+        return obs, actions, log_prob(logits, actions, self.nvec), value.float(), acted
+
+    @torch.no_grad()
+    def env_step(self, actions: Tensor, acted: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """Step the env with `actions`; returns rewards, terminated, truncated (masked by `acted`)
+        and V(final observation) of the truncated slots (0 elsewhere)."""
+        acted_np = self.env.masks.copy()
+        # the only synchronisation per step; GPU work queued before it (storage writes) and
+        # after it (uploads) overlaps the env step, which runs nogil on the CPU
+        self.env.step(actions.to("cpu").numpy())
+        self.tracker.on_step(acted_np)
+        rewards = self._to_device(self.env.rewards, "rewards") * acted
+        term = self._to_device(self.env.terminations, "term") & acted
+        trunc = self._to_device(self.env.truncations, "trunc") & acted & ~term
+        final_values = torch.zeros_like(rewards)
+        if self.env.truncations.any():
+            idx = torch.nonzero(trunc).flatten()
+            if len(idx):
+                final_obs = self._to_device(self.env.final_observations, "final_obs")[idx]
+                no_start = torch.zeros(len(idx), dtype=torch.bool, device=self.device)
+                with self.autocast():  # the state after step t continues into the final obs
+                    _, v, _ = self.model(final_obs, _index(self.state, idx), no_start)
+                final_values[idx] = v.float()
+        masks = self._to_device(self.env.masks, "masks")
+        self.next_start = masks & (~acted | term | trunc)
+        return rewards, term, trunc, final_values
+
+    def collect(self) -> None:
+        """Fill the storage with one rollout."""
+        s, cfg = self.storage, self.config
+        if self.needs_reset:
+            self.reset_env(cfg.seed + self.dist.rank)
+        s.initial_state = tuple(x.clone() for x in self.state)
+        for t in range(cfg.rollout_length):
+            s.episode_start[t] = self.next_start
+            s.obs[t], s.actions[t], s.logprobs[t], s.values[t], s.active[t] = self.act()
+            s.rewards[t], s.terminated[t], s.truncated[t], s.final_values[t] = self.env_step(
+                s.actions[t], s.active[t]
+            )
+            self.agent_steps += int(self.env.reward_mask.sum())
+        self.global_step += self.slots_per_update
+
+    # ---------------------------------------------------------------------------------------
+    # ADVANTAGES: GAE with V(final obs) at truncations, 0 at terminations, nothing across slots
+    @torch.no_grad()
+    def compute_advantages(self) -> None:
+        s, cfg = self.storage, self.config
+        obs = self._to_device(self.env.observations, "obs")
+        with self.autocast():
+            _, next_value, _ = self.model(obs, self.state, self.next_start)
+        s.advantages, s.returns = compute_gae(
+            s.rewards,
+            s.values,
+            next_value.float(),
+            s.active,
+            s.terminated,
+            s.truncated,
+            s.final_values,
+            cfg.gamma,
+            cfg.gae_lambda,
+        )
+
+    # ---------------------------------------------------------------------------------------
+    # UPDATE: epochs x minibatches of whole slot sequences (BPTT), clipped PPO losses
+    def minibatch_loss(self, slots: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+        """Total loss of the agent slots `slots` and its parts."""
+        cfg, mb = self.config, self.storage.minibatch(slots)
+        with self.autocast():
+            logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"])
+        logits, values, mask = logits.float(), values.float(), mb["active"]
+        new_logprob = log_prob(logits, mb["actions"], self.nvec)
+        adv = normalize_advantages(mb["advantages"], mask) if cfg.norm_adv else mb["advantages"]
+        pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef)
+        vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef)
+        ent = masked_mean(entropy(logits, self.nvec), mask)
+        loss = pg - cfg.ent_coef * ent + cfg.vf_coef * vl
+        return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
+
+    def update(self) -> dict[str, float]:
+        """PPO epochs over the stored rollout; returns mean losses and diagnostics."""
+        cfg = self.config
+        if cfg.anneal_lr:
+            frac = 1.0 - self.update_idx / self.total_updates
+            self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
+        size = -(-self.num_slots // cfg.num_minibatches)
+        sums: dict[str, float] = {}
+        count = 0
+        for _epoch in range(cfg.num_epochs):
+            order = torch.randperm(self.num_slots, generator=self.shuffle_gen).to(self.device)
+            for start in range(0, self.num_slots, size):
+                loss, info = self.minibatch_loss(order[start : start + size])
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                if cfg.max_grad_norm > 0:
+                    info["grad_norm"] = nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+                for k, v in info.items():
+                    sums[k] = sums.get(k, 0.0) + float(v)
+                count += 1
+            kl = all_reduce_mean(info["approx_kl"], self.dist)  # same decision on every rank
+            if cfg.target_kl is not None and float(kl) > cfg.target_kl:
+                break
+        out = {f"losses/{k}": v / max(count, 1) for k, v in sums.items()}
+        out["losses/explained_variance"] = self._explained_variance()
+        out["charts/learning_rate"] = self.optimizer.param_groups[0]["lr"]
+        return out
+
+    def _explained_variance(self) -> float:
+        s = self.storage
+        m = s.active
+        if int(m.sum()) < 2:
+            return float("nan")
+        y, pred = s.returns[m], s.values[m]
+        var = torch.var(y)
+        return float(1.0 - torch.var(y - pred) / var) if var > 0 else float("nan")
+
+    # ---------------------------------------------------------------------------------------
+    # the loop
+    def train(self, num_updates: int | None = None, logger: RunLogger | None = None) -> dict[str, float]:
+        """Run updates until `total_updates` (or `num_updates` more); returns the last metrics."""
+        cfg = self.config
+        stop = self.total_updates
+        if num_updates is not None:
+            stop = min(stop, self.update_idx + num_updates)
+        metrics: dict[str, float] = {}
+        while self.update_idx < stop:
+            t0, steps0 = time.perf_counter(), self.agent_steps
+            self.collect()
+            self.compute_advantages()
+            t1 = time.perf_counter()
+            metrics = self.update()
+            self.update_idx += 1
+            t2 = time.perf_counter()
+            metrics.update(self._rates(self.agent_steps - steps0, t1 - t0, t2 - t0))
+            records, returns = self.tracker.pop()
+            metrics.update(summarize(records, returns))
+            if logger is not None:
+                if self.update_idx % cfg.log_interval == 0:
+                    logger.scalars(metrics, self.global_step * self.dist.world_size)
+                logger.progress(1, metrics)
+            if cfg.checkpoint_interval and self.update_idx % cfg.checkpoint_interval == 0:
+                self.save_periodic()
+        return metrics
+
+    def _rates(self, agent_steps: int, t_collect: float, t_total: float) -> dict[str, float]:
+        return {
+            "sps": agent_steps * self.dist.world_size / t_total,
+            "collect_sps": agent_steps / t_collect,
+            "slot_sps": self.slots_per_update * self.dist.world_size / t_total,
+            "active_share": agent_steps / self.slots_per_update,
+        }
+
+    # ---------------------------------------------------------------------------------------
+    # evaluation and checkpoints
+    @torch.no_grad()
+    def evaluate(self, episodes: int, max_steps: int, deterministic: bool, seed: int) -> dict[str, float]:
+        """Run the policy on fresh episodes (env reset with `seed`) until `episodes` world
+        episodes ended or `max_steps` env steps; returns `episodes.summarize` of them. Training
+        afterwards starts from a fresh reset."""
+        self.reset_env(seed)
+        records: list[dict[str, object]] = []
+        returns: list[float] = []
+        for _ in range(max_steps):
+            _, actions, _, _, acted = self.act(deterministic)
+            self.env_step(actions, acted)
+            r, g = self.tracker.pop()
+            records += r
+            returns += g
+            if len(records) >= episodes:
+                break
+        self.needs_reset = True
+        return summarize(records, returns)
+
+    def state_dict(self) -> dict[str, object]:
+        """Everything `load_state_dict` needs to continue exactly (see checkpoint.py)."""
+        return {
+            "config": self.config.to_dict(),
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "counters": {
+                "update": self.update_idx,
+                "global_step": self.global_step,
+                "agent_steps": self.agent_steps,
+            },
+            "sample_gen": self.sample_gen.get_state(),
+            "shuffle_gen": self.shuffle_gen.get_state(),
+            "recurrent": [s.cpu() for s in self.state],
+            "next_start": self.next_start.cpu(),
+            "needs_reset": self.needs_reset,
+            "tracker": self.tracker.state_dict(),
+            "env": ckpt.env_state(self.env),
+        }
+
+    def load_state_dict(self, payload: dict[str, object]) -> None:
+        self.model.load_state_dict(payload["model"])
+        self.optimizer.load_state_dict(payload["optimizer"])
+        c = payload["counters"]
+        self.update_idx, self.global_step, self.agent_steps = c["update"], c["global_step"], c["agent_steps"]
+        self.sample_gen.set_state(payload["sample_gen"])
+        self.shuffle_gen.set_state(payload["shuffle_gen"])
+        self.state = tuple(s.to(self.device) for s in payload["recurrent"])
+        self.next_start = payload["next_start"].to(self.device)
+        self.needs_reset = payload["needs_reset"]
+        ckpt.load_env_state(self.env, payload["env"])
+        self.tracker.load_state_dict(payload["tracker"])
+        if "rng" in payload:
+            ckpt.set_rng_state(payload["rng"])
+
+    def save(self, path: str | Path) -> Path:
+        return ckpt.save(path, self.state_dict())
+
+    def load(self, path: str | Path) -> None:
+        self.load_state_dict(ckpt.load(path, map_location="cpu"))
+
+    def save_periodic(self) -> Path | None:
+        """Checkpoint into `<run_dir>/checkpoints` (every rank its own file) and prune old ones."""
+        if self.run_dir is None:
+            return None
+        folder = self.run_dir / "checkpoints"
+        path = self.save(folder / ckpt.checkpoint_name(self.update_idx, self.dist.rank))
+        ckpt.prune(folder, self.config.keep_checkpoints, self.dist.rank)
+        return path
