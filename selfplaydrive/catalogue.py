@@ -14,7 +14,9 @@ from importlib import resources
 from selfplaydrive.builder import CONFIG_MODULE
 
 GROUP_ORDER = ("map", "spawner", "physics", "reward", "obs", "env", "env/actions", "model", "trainer", "eval")
-_LINE = re.compile(r"^(?P<indent>\s*)(?P<key>[A-Za-z_][\w]*):\s*(?P<value>[^#]*?)\s*(?:#\s*(?P<comment>.*))?$")
+_LINE = re.compile(
+    r"^(?P<indent>\s*)(?P<key>[A-Za-z_][\w]*):\s*(?P<value>[^#]*?)\s*(?:#\s*(?P<comment>.*))?$"
+)
 
 
 def _rows(text: str) -> tuple[str, list[tuple[str, str, str]]]:

@@ -8,6 +8,7 @@ in range, a non-empty map.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import numpy as np
 
@@ -42,13 +43,17 @@ def _check_points(points: np.ndarray, what: str, source: str, element: str, min_
     return pts
 
 
-def _csr(lists: Sequence[Sequence[int]], count: int, what: str, source: str, ids: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+def _csr(
+    lists: Sequence[Sequence[int]], count: int, what: str, source: str, ids: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray]:
     offsets = np.zeros(len(lists) + 1, dtype=np.int32)
     flat: list[int] = []
     for i, items in enumerate(lists):
         for j in items:
             if not 0 <= int(j) < count:
-                raise MapError(f"{what} refers to lane index {j}, valid range is [0, {count})", source, ids[i])
+                raise MapError(
+                    f"{what} refers to lane index {j}, valid range is [0, {count})", source, ids[i]
+                )
             flat.append(int(j))
         offsets[i + 1] = len(flat)
     return offsets, np.asarray(flat, dtype=np.int32)
@@ -105,7 +110,7 @@ def cut_polyline(points: np.ndarray, max_len: float, tol: float) -> tuple[np.nda
     """
     pts = simplify_polyline(points, tol)
     starts, ends = [], []
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in pairwise(pts):
         n = max(1, int(np.ceil(np.hypot(*(b - a)) / max_len - 1e-9)))
         t = np.linspace(0.0, 1.0, n + 1)[:, None]
         p = a + t * (b - a)
@@ -114,7 +119,9 @@ def cut_polyline(points: np.ndarray, max_len: float, tol: float) -> tuple[np.nda
     return np.concatenate(starts), np.concatenate(ends)
 
 
-def _segments(groups: Sequence[tuple[SegmentType, Polylines, bool]], max_len: float, tol: float) -> RoadSegments:
+def _segments(
+    groups: Sequence[tuple[SegmentType, Polylines, bool]], max_len: float, tol: float
+) -> RoadSegments:
     s_all, e_all, t_all, o_all = [], [], [], []
     for seg_type, lines, closed in groups:
         for i in range(len(lines)):
@@ -157,7 +164,9 @@ def build_grid(mid: np.ndarray, bounds: np.ndarray, cell_size: float) -> Segment
     counts = np.bincount(cell, minlength=nx * ny)
     offsets = np.zeros(nx * ny + 1, dtype=np.int32)
     offsets[1:] = np.cumsum(counts)
-    return SegmentGrid(origin=origin, cell_size=float(cell_size), shape=(nx, ny), cell_offsets=offsets, cell_items=order)
+    return SegmentGrid(
+        origin=origin, cell_size=float(cell_size), shape=(nx, ny), cell_offsets=offsets, cell_items=order
+    )
 
 
 def query_grid_numpy(road_map: RoadMap, x: float, y: float, radius: float) -> np.ndarray:
@@ -249,10 +258,14 @@ def compile_map(
             f"cell_size={cell_size}, collinear_tol={collinear_tol}",
             src,
         )
-    all_pts = np.concatenate([np.asarray(lane.centerline, dtype=np.float64).reshape(-1, 2) for lane in elements.lanes])
+    all_pts = np.concatenate(
+        [np.asarray(lane.centerline, dtype=np.float64).reshape(-1, 2) for lane in elements.lanes]
+    )
     if not np.all(np.isfinite(all_pts)):
         bad = next(i for i, lane in enumerate(elements.lanes) if not np.all(np.isfinite(lane.centerline)))
-        raise MapError("lane centerline has non-finite coordinates (NaN or inf)", src, elements.lanes[bad].source_id)
+        raise MapError(
+            "lane centerline has non-finite coordinates (NaN or inf)", src, elements.lanes[bad].source_id
+        )
     # recentre on the lane bounding box so float32 keeps ~mm precision anywhere on the map
     shift = np.round((all_pts.min(axis=0) + all_pts.max(axis=0)) / 2.0)
     lanes = _lanes(elements, shift)
@@ -272,7 +285,9 @@ def compile_map(
     stop_ids = [e.source_id for e in elements.stop_lines]
     light_ids = [e.source_id for e in elements.traffic_lights]
     stop_off, stop_idx = _csr([e.lanes for e in elements.stop_lines], n, "stop line lane", src, stop_ids)
-    light_off, light_idx = _csr([e.lanes for e in elements.traffic_lights], n, "traffic light lane", src, light_ids)
+    light_off, light_idx = _csr(
+        [e.lanes for e in elements.traffic_lights], n, "traffic light lane", src, light_ids
+    )
     groups = np.array([e.signal_group for e in elements.traffic_lights], dtype=np.int32)
     if len(groups) and groups.min() < 0:
         raise MapError(f"signal groups must be >= 0, got {groups.min()}", src)
