@@ -99,10 +99,10 @@ def train_task(cfg: Any) -> dict[str, Any]:
 
     run_dir = write_run_meta(cfg)
     env = build_env(cfg)
-    model = build_model(cfg, env)
     trainer = instantiate(cfg.trainer)
-    if hasattr(trainer, "run"):  # e.g. the stable-baselines3 path (trainer=sb3)
+    if hasattr(trainer, "run"):  # e.g. the stable-baselines3 path (trainer=sb3) builds its own policy
         return trainer.run(env, cfg, run_dir)
+    model = build_model(cfg, env)
     return train_run(env, model, trainer, run_dir)
 
 
