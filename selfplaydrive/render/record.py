@@ -18,20 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from selfplaydrive.maps.roadmap import RoadMap
+from selfplaydrive.rewards.registry import EVENT_NAMES
 
 __all__ = ["Recording", "ScenarioLog", "WorldFrame", "record_episode", "snapshot"]
-
-# EVENT_NAMES of sim/vec_env.py, repeated so that drawing a saved recording needs no simulator
-EVENT_NAMES = (
-    "collision",
-    "pedestrian_collision",
-    "offroad",
-    "red_light",
-    "waypoint",
-    "comfort",
-    "terminated",
-    "truncated",
-)
 
 
 @dataclass

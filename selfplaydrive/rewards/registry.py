@@ -12,6 +12,19 @@ from typing import Protocol
 
 import numpy as np
 
+# Per-episode event counters of `VecEnv.pop_episode_stats()` (the kernels' `ev_count` order);
+# pure Python so a saved recording can be drawn without the simulator.
+EVENT_NAMES = (
+    "collision",
+    "pedestrian_collision",
+    "offroad",
+    "red_light",
+    "waypoint",
+    "comfort",
+    "terminated",
+    "truncated",
+)
+
 
 @dataclass(frozen=True)
 class RewardTerm:

@@ -28,23 +28,13 @@ from selfplaydrive._sim.world import STAGES, World
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
-from selfplaydrive.rewards.registry import TERM_NAMES, RewardHook
+from selfplaydrive.rewards.registry import EVENT_NAMES, TERM_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, check_scenario, pack
 from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.params import SimParams
 
-EVENT_NAMES = (
-    "collision",
-    "pedestrian_collision",
-    "offroad",
-    "red_light",
-    "waypoint",
-    "comfort",
-    "terminated",
-    "truncated",
-)
 EVER_BITS = {"collision": 1, "pedestrian_collision": 2, "offroad": 4, "red_light": 8}
 
 
