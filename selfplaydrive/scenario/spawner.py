@@ -48,7 +48,7 @@ from selfplaydrive.scenario.placement import (
     wrap_angle,
 )
 from selfplaydrive.scenario.placement import greedy_separated as _greedy
-from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
+from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
 
@@ -401,36 +401,13 @@ def _check_int(name: str, value: int, minimum: int) -> None:
 
 def _empty_scenario(sp: PaperSpawner, map_index: int, box: np.ndarray, groups: int) -> Scenario:
     """A Scenario with every slot invalid and zero-filled (the padding convention)."""
-    a, k, s, p = sp.num_agents, sp.max_waypoints, sp.num_static, sp.num_pedestrians
-    f32 = np.float32
-    return Scenario(
-        map_index=int(map_index),
-        region=box.astype(f32),
-        agent_valid=np.zeros(a, bool),
-        agent_xy=np.zeros((a, 2), f32),
-        agent_heading=np.zeros(a, f32),
-        agent_speed=np.zeros(a, f32),
-        agent_length=np.zeros(a, f32),
-        agent_width=np.zeros(a, f32),
-        agent_parked=np.zeros(a, bool),
-        agent_lane=np.full(a, -1, np.int32),
-        waypoints=np.zeros((a, k, 2), f32),
-        num_waypoints=np.zeros(a, np.int32),
-        coeffs=np.zeros((a, len(COEFF_NAMES)), f32),
-        hidden=np.zeros((a, len(HIDDEN_PARAMS)), f32),
-        static_valid=np.zeros(s, bool),
-        static_xy=np.zeros((s, 2), f32),
-        static_heading=np.zeros(s, f32),
-        static_length=np.zeros(s, f32),
-        static_width=np.zeros(s, f32),
-        ped_valid=np.zeros(p, bool),
-        ped_path=np.zeros((p, PATH_POINTS, 2), f32),
-        ped_num_points=np.zeros(p, np.int32),
-        ped_speed=np.zeros(p, f32),
-        ped_start_time=np.zeros(p, f32),
-        ped_size=np.zeros((p, 2), f32),
-        lights_enabled=False,
-        light_state=np.zeros(groups, np.int8),
-        light_time_left=np.zeros(groups, f32),
-        episode_length=0.0,
+    return Scenario.empty(
+        sp.num_agents,
+        sp.max_waypoints,
+        sp.num_static,
+        sp.num_pedestrians,
+        PATH_POINTS,
+        groups,
+        map_index,
+        box,
     )

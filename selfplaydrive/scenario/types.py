@@ -96,3 +96,51 @@ class Scenario:
     light_state: np.ndarray
     light_time_left: np.ndarray
     episode_length: float
+
+    @classmethod
+    def empty(
+        cls,
+        num_agents: int,
+        max_waypoints: int,
+        num_static: int,
+        num_pedestrians: int,
+        path_points: int,
+        num_groups: int,
+        map_index: int = 0,
+        region: np.ndarray | None = None,
+        episode_length: float = 0.0,
+    ) -> Scenario:
+        """A scenario with every slot invalid and zero-filled (the padding convention), lights
+        off; spawners and scenario suites fill in the slots they use."""
+        a, k, s, p, f4 = num_agents, max_waypoints, num_static, num_pedestrians, np.float32
+        return cls(
+            map_index=int(map_index),
+            region=np.zeros(4, f4) if region is None else np.asarray(region, f4),
+            agent_valid=np.zeros(a, bool),
+            agent_xy=np.zeros((a, 2), f4),
+            agent_heading=np.zeros(a, f4),
+            agent_speed=np.zeros(a, f4),
+            agent_length=np.zeros(a, f4),
+            agent_width=np.zeros(a, f4),
+            agent_parked=np.zeros(a, bool),
+            agent_lane=np.full(a, -1, np.int32),
+            waypoints=np.zeros((a, k, 2), f4),
+            num_waypoints=np.zeros(a, np.int32),
+            coeffs=np.zeros((a, len(COEFF_NAMES)), f4),
+            hidden=np.zeros((a, len(HIDDEN_PARAMS)), f4),
+            static_valid=np.zeros(s, bool),
+            static_xy=np.zeros((s, 2), f4),
+            static_heading=np.zeros(s, f4),
+            static_length=np.zeros(s, f4),
+            static_width=np.zeros(s, f4),
+            ped_valid=np.zeros(p, bool),
+            ped_path=np.zeros((p, path_points, 2), f4),
+            ped_num_points=np.zeros(p, np.int32),
+            ped_speed=np.zeros(p, f4),
+            ped_start_time=np.zeros(p, f4),
+            ped_size=np.zeros((p, 2), f4),
+            lights_enabled=False,
+            light_state=np.zeros(num_groups, np.int8),
+            light_time_left=np.full(num_groups, float(episode_length), f4),
+            episode_length=float(episode_length),
+        )

@@ -211,10 +211,9 @@ class VecEnv:
         if not self.buffers["done"].any():
             return  # no per-world Python work on the common path
         done = np.flatnonzero(self.buffers["done"]).astype(np.int32)
-        if len(done):
-            self._record_episodes(done)
-            self._reset_worlds(done)
-            self._run_obs_hooks(None)
+        self._record_episodes(done)
+        self._reset_worlds(done)
+        self._run_obs_hooks(None)
 
     def _step_external_physics(self, a: np.ndarray) -> None:
         """Dynamics stepped in Python (e.g. `PymunkModel`) before the kernels, which skip theirs."""

@@ -24,7 +24,7 @@ import numpy as np
 from selfplaydrive.maps.roadmap import RoadMap, SegmentType
 from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS
-from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
+from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.sim.layout import ObsLayout
 
 AGENT_SLOTS = 2  # A: the ego, and the second vehicle of the stop-line suite
@@ -110,40 +110,18 @@ def eval_coefficients() -> np.ndarray:
 
 def blank_scenario(road_map: RoadMap, map_index: int, centre: np.ndarray, episode_length: float) -> Scenario:
     """A scenario with every slot invalid, lights off and a `REGION_SIZE` region around `centre`."""
-    a, k, s, p = AGENT_SLOTS, WAYPOINT_SLOTS, STATIC_SLOTS, PED_SLOTS
-    f4 = np.float32
     h = REGION_SIZE / 2
-    groups = road_map.num_signal_groups
-    return Scenario(
-        map_index=int(map_index),
-        region=np.array([centre[0] - h, centre[1] - h, centre[0] + h, centre[1] + h], f4),
-        agent_valid=np.zeros(a, bool),
-        agent_xy=np.zeros((a, 2), f4),
-        agent_heading=np.zeros(a, f4),
-        agent_speed=np.zeros(a, f4),
-        agent_length=np.zeros(a, f4),
-        agent_width=np.zeros(a, f4),
-        agent_parked=np.zeros(a, bool),
-        agent_lane=np.full(a, -1, np.int32),
-        waypoints=np.zeros((a, k, 2), f4),
-        num_waypoints=np.zeros(a, np.int32),
-        coeffs=np.zeros((a, len(COEFF_NAMES)), f4),
-        hidden=np.zeros((a, len(HIDDEN_PARAMS)), f4),
-        static_valid=np.zeros(s, bool),
-        static_xy=np.zeros((s, 2), f4),
-        static_heading=np.zeros(s, f4),
-        static_length=np.zeros(s, f4),
-        static_width=np.zeros(s, f4),
-        ped_valid=np.zeros(p, bool),
-        ped_path=np.zeros((p, PATH_POINTS, 2), f4),
-        ped_num_points=np.zeros(p, np.int32),
-        ped_speed=np.zeros(p, f4),
-        ped_start_time=np.zeros(p, f4),
-        ped_size=np.zeros((p, 2), f4),
-        lights_enabled=False,
-        light_state=np.zeros(groups, np.int8),
-        light_time_left=np.full(groups, float(episode_length), f4),
-        episode_length=float(episode_length),
+    region = np.array([centre[0] - h, centre[1] - h, centre[0] + h, centre[1] + h])
+    return Scenario.empty(
+        AGENT_SLOTS,
+        WAYPOINT_SLOTS,
+        STATIC_SLOTS,
+        PED_SLOTS,
+        PATH_POINTS,
+        road_map.num_signal_groups,
+        map_index,
+        region,
+        episode_length,
     )
 
 
