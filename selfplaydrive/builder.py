@@ -11,11 +11,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from selfplaydrive.errors import ConfigError
+from selfplaydrive.errors import ConfigError, MapError
 from selfplaydrive.maps.roadmap import RoadMap
 
 CONFIG_MODULE = "selfplaydrive.conf"
-GROUPS = ("map", "spawner", "physics", "reward", "obs", "env", "model", "trainer", "logger", "eval")
+GROUPS = (
+    "map", "spawner", "physics", "reward", "obs", "env", "model", "trainer", "logger", "eval", "experiment",
+)  # fmt: skip
 
 
 def compose(config_name: str = "train", overrides: Sequence[str] = ()) -> Any:
@@ -72,7 +74,7 @@ def config_error(exc: Exception, config_name: str, overrides: Sequence[str]) -> 
             opts = valid_options(key)
             if opts:
                 hints.append(f"valid options for '{key}': {', '.join(opts)}")
-        elif "." in key:
+        else:  # a dotted key (reward.colision.high) or a top-level one (drivr=random)
             try:
                 base = compose(config_name, [o for o in overrides if o != ov])
             except ConfigError:
@@ -89,10 +91,24 @@ def config_error(exc: Exception, config_name: str, overrides: Sequence[str]) -> 
 
 
 def instantiate(node: Any, **kwargs: Any) -> Any:
-    """`hydra.utils.instantiate` with `_convert_="all"` (plain Python containers only)."""
+    """`hydra.utils.instantiate` with `_convert_="all"` (plain Python containers only).
+
+    Raises:
+        ConfigError, MapError: What a component's constructor raised (Hydra's wrapper removed);
+            other `ValueError`s of a constructor become a `ConfigError` naming the config key.
+    """
+    from hydra.errors import InstantiationException
     from hydra.utils import instantiate as hydra_instantiate
 
-    return hydra_instantiate(node, _convert_="all", **kwargs)
+    try:
+        return hydra_instantiate(node, _convert_="all", **kwargs)
+    except InstantiationException as exc:
+        cause = exc.__cause__
+        if isinstance(cause, (ConfigError, MapError)):
+            raise cause from None
+        if isinstance(cause, ValueError):
+            raise ConfigError(str(exc)) from cause
+        raise
 
 
 def build_maps(node: Any) -> list[RoadMap]:

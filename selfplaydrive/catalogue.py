@@ -13,7 +13,9 @@ from importlib import resources
 
 from selfplaydrive.builder import CONFIG_MODULE
 
-GROUP_ORDER = ("map", "spawner", "physics", "reward", "obs", "env", "env/actions", "model", "trainer", "eval")
+GROUP_ORDER = (
+    "map", "spawner", "physics", "reward", "obs", "env", "env/actions", "model", "trainer", "logger", "eval",
+)  # fmt: skip
 _LINE = re.compile(
     r"^(?P<indent>\s*)(?P<key>[A-Za-z_][\w]*):\s*(?P<value>[^#]*?)\s*(?:#\s*(?P<comment>.*))?$"
 )
@@ -49,8 +51,12 @@ def group_markdown(group: str) -> str:
             out += [header, ""]
         if target:
             out += [f"Component: `{target}`", ""]
-        out += ["| key | default | notes |", "|---|---|---|"]
-        out += [f"| `{k}` | `{v}` | {c} |" for k, v, c in rows if k != "_target_"]
+        keys = [(k, v, c) for k, v, c in rows if k not in ("_target_", "_partial_")]
+        if keys:
+            out += ["| key | default | notes |", "|---|---|---|"]
+            out += [f"| `{k}` | `{v}` | {c} |" for k, v, c in keys]
+        else:
+            out.append("No keys.")
         out.append("")
     return "\n".join(out)
 

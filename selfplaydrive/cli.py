@@ -2,14 +2,18 @@
 
 ``main`` only picks the command and hands the rest of the argument list to that command's
 function, so each command parses its own arguments: argparse here (``map``), Hydra overrides
-for the training commands (``train``, ``eval``, ``render``, ``bench``) added to `COMMANDS`
-later. Exit codes: 0 success, 1 a map/config error (message on stderr), 2 bad usage.
+and ``-m`` sweeps for ``train``, ``eval``, ``render`` and ``bench`` (selfplaydrive/hydra_app.py,
+configs in selfplaydrive/conf/). Exit codes: 0 success, 1 a map/config error (message on
+stderr), 2 bad usage.
 
 Examples::
 
     selfplaydrive map info ../shared/maps/tartu_lanelet2/tartu_demo_l.osm --json
     selfplaydrive map render default -o town.png --arrows
     selfplaydrive map render Town01.xodr -o crop.png --region -100 -100 100 100 --dpi 200
+    selfplaydrive render driver=random steps=50 output=random.gif physics=bicycle
+    selfplaydrive bench --json map=file map.spec=Town01.xodr
+    selfplaydrive bench -m physics=bicycle,friction threads=[1]
 """
 
 from __future__ import annotations
@@ -145,22 +149,18 @@ def cmd_map(argv: Sequence[str]) -> int:
 
 
 def cmd_bench(argv: Sequence[str]) -> int:
-    """``selfplaydrive bench [--json] [--map PATH] ...``: simulator throughput (sim/bench.py)."""
-    from selfplaydrive.sim.bench import main as bench_main
+    """``selfplaydrive bench [hydra overrides] [json=true|--json] [-m]``: simulator throughput
+    (conf/bench.yaml, sim/bench.py)."""
+    from selfplaydrive.hydra_app import cmd_bench as bench
 
-    try:
-        bench_main(list(argv))
-    except (MapError, ConfigError) as exc:
-        print(f"selfplaydrive bench: error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+    return bench(argv)
 
 
 def cmd_render(argv: Sequence[str]) -> int:
-    """``selfplaydrive render [--map SPEC] [--driver D] [-o out.gif] ...``: draw an episode."""
-    from selfplaydrive.render.video import main as render_main
+    """``selfplaydrive render [hydra overrides] [-m]``: draw an episode (conf/render.yaml)."""
+    from selfplaydrive.hydra_app import cmd_render as render
 
-    return render_main(list(argv))
+    return render(argv)
 
 
 # command name -> (function taking the remaining argv and returning an exit code, one-line help)
@@ -182,8 +182,8 @@ COMMANDS: dict[str, tuple[Callable[[Sequence[str]], int], str]] = {
     "train": (cmd_train, "train a policy (Hydra overrides, -m for sweeps)"),
     "eval": (cmd_eval, "rule-adherence suites and long-form evaluation (Hydra overrides)"),
     "map": (cmd_map, "inspect (info) and draw (render) road maps"),
-    "render": (cmd_render, "drive an episode and draw it top-down (PNG frames, GIF, MP4)"),
-    "bench": (cmd_bench, "simulator throughput in the paper configuration (agent-steps/s)"),
+    "render": (cmd_render, "drive an episode and draw it top-down: PNG frames, GIF, MP4 (Hydra overrides)"),
+    "bench": (cmd_bench, "simulator throughput in agent-steps/s (Hydra overrides, --json)"),
 }
 
 

@@ -12,9 +12,14 @@ from pathlib import Path
 from typing import Any
 
 from selfplaydrive.builder import CONFIG_MODULE, compose
-from selfplaydrive.errors import ConfigError
+from selfplaydrive.errors import ConfigError, MapError
 
-HYDRA_FLAGS = {"-m", "--multirun", "--cfg", "--resolve", "--info", "-c", "--help", "-h", "--hydra-help"}
+# Hydra's own command-line flags (hydra/_internal/utils.py get_args_parser)
+HYDRA_FLAGS = {
+    "-m", "--multirun", "--cfg", "-c", "--resolve", "--info", "-i", "--help", "-h", "--hydra-help",
+    "--version", "--package", "-p", "--run", "-r", "--shell-completion", "-sc", "--config-path",
+    "-cp", "--config-name", "-cn", "--config-dir", "-cd", "--experimental-rerun",
+}  # fmt: skip
 
 
 def check_overrides(config_name: str, argv: Sequence[str]) -> None:
@@ -68,20 +73,50 @@ def write_run_meta(cfg: Any) -> Path:
     return run_dir
 
 
-def run_hydra(config_name: str, task: Callable[[Any], Any], argv: Sequence[str]) -> int:
-    """Run `task(cfg)` under Hydra with `argv` as the override list (supports `-m`)."""
+def run_hydra(
+    config_name: str,
+    task: Callable[[Any], Any],
+    argv: Sequence[str],
+    usage_errors: tuple[type[Exception], ...] = (),
+) -> int:
+    """Run `task(cfg)` under Hydra with `argv` as the override list (supports `-m`).
+
+    Returns:
+        The exit code: 0 when every run succeeded, 1 when a run raised a `ConfigError` or
+        `MapError` (its message goes to stderr; the other runs of a sweep still run), 2 on an
+        unknown command-line flag or when a run raised one of `usage_errors`.
+    """
     import hydra
 
     argv = list(argv)
+    flags = [a for a in argv if a.startswith("-") and a.split("=", 1)[0] not in HYDRA_FLAGS]
+    if flags:
+        print(
+            f"selfplaydrive {config_name}: error: unrecognized argument(s) {' '.join(flags)}; this command "
+            "takes Hydra overrides key=value (see --help, and --cfg job for the keys) and -m for sweeps",
+            file=sys.stderr,
+        )
+        return 2
     try:
         check_overrides(config_name, argv)
     except ConfigError as exc:
         print(f"selfplaydrive {config_name}: error: {exc}", file=sys.stderr)
         return 1
+    status = [0]
 
     @hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=config_name, version_base="1.3")
     def _main(cfg: Any) -> Any:
-        return task(cfg)
+        try:
+            return task(cfg)
+        except (ConfigError, MapError) as exc:
+            code = 1
+            error = exc
+        except usage_errors as exc:
+            code = 2
+            error = exc
+        print(f"selfplaydrive {config_name}: error: {error}", file=sys.stderr)
+        status[0] = max(status[0], code)
+        return None
 
     saved = sys.argv
     sys.argv = [f"selfplaydrive {config_name}", *argv]
@@ -89,7 +124,7 @@ def run_hydra(config_name: str, task: Callable[[Any], Any], argv: Sequence[str])
         _main()
     finally:
         sys.argv = saved
-    return 0
+    return status[0]
 
 
 def train_task(cfg: Any) -> dict[str, Any]:
@@ -100,10 +135,11 @@ def train_task(cfg: Any) -> dict[str, Any]:
     run_dir = write_run_meta(cfg)
     env = build_env(cfg)
     trainer = instantiate(cfg.trainer)
+    logger = instantiate(cfg.logger, _partial_=True)  # the trainer fills run_dir, total_updates ...
     if hasattr(trainer, "run"):  # e.g. the stable-baselines3 path (trainer=sb3) builds its own policy
-        return trainer.run(env, cfg, run_dir)
+        return trainer.run(env, cfg, run_dir, logger=logger)
     model = build_model(cfg, env)
-    return train_run(env, model, trainer, run_dir)
+    return train_run(env, model, trainer, run_dir, logger=logger)
 
 
 def cmd_train(argv: Sequence[str]) -> int:
@@ -116,3 +152,82 @@ def cmd_eval(argv: Sequence[str]) -> int:
     from selfplaydrive.eval.app import eval_task
 
     return run_hydra("eval", eval_task, argv)
+
+
+def render_task(cfg: Any) -> dict[str, Any]:
+    """One rendered episode: build the env of the config, drive and draw it (conf/render.yaml)."""
+    from selfplaydrive.builder import build_env
+    from selfplaydrive.render.video import render_episode
+
+    write_run_meta(cfg)
+    env = build_env(cfg)
+    out = render_episode(
+        cfg.output,
+        driver=str(cfg.driver),
+        steps=int(cfg.steps),
+        world=int(cfg.world),
+        seed=int(cfg.seed),
+        fps=float(cfg.fps),
+        follow=None if cfg.follow is None else int(cfg.follow),
+        size=int(cfg.size),
+        view=None if cfg.view is None else float(cfg.view),
+        tail=int(cfg.tail),
+        every=int(cfg.every),
+        waypoints=bool(cfg.waypoints),
+        text=bool(cfg.text),
+        deterministic=bool(cfg.deterministic),
+        env=env,
+    )
+    files = out["files"]
+    where = files[0] if len(files) == 1 else f"{files[0]} ... {files[-1]}"
+    print(
+        f"wrote {out['frames']} frames to {where} (stepping {out['record_s']:.1f} s, "
+        f"drawing and writing {out['render_s']:.1f} s = {out['render_fps']:.1f} frames/s)"
+    )
+    return out
+
+
+def bench_task(cfg: Any) -> dict[str, Any]:
+    """Simulator throughput of the config's env at each thread count (conf/bench.yaml); prints
+    text or, with `json=true`, one JSON object; writes bench.json into the run folder."""
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.builder import build_env, build_maps
+    from selfplaydrive.sim.bench import _print_text, run_bench
+
+    run_dir = write_run_meta(cfg)
+    maps = build_maps(cfg.map)  # loaded once for every thread count
+
+    def make_env(threads: int, profile: bool) -> Any:
+        return build_env(cfg, maps=maps, num_threads=threads, profile=profile)
+
+    name = str(cfg.map.spec) if "spec" in cfg.map else maps[0].name
+    threads = [int(t) for t in cfg.threads] if OmegaConf.is_list(cfg.threads) else [int(cfg.threads)]
+    out = run_bench(
+        make_env,
+        name,
+        threads,
+        int(cfg.steps),
+        int(cfg.warmup),
+        int(cfg.repeats),
+        int(cfg.seed),
+        bool(cfg.stages),
+    )
+    (run_dir / "bench.json").write_text(json.dumps(out, indent=2) + "\n")
+    if cfg.json:
+        print(json.dumps(out))
+    else:
+        _print_text(out)
+    return out
+
+
+def cmd_render(argv: Sequence[str]) -> int:
+    """``selfplaydrive render [overrides] [-m]``; 2 on bad arguments (an unknown output format,
+    world or follow out of range, MP4 without the video extra)."""
+    return run_hydra("render", render_task, argv, usage_errors=(ValueError, RuntimeError))
+
+
+def cmd_bench(argv: Sequence[str]) -> int:
+    """``selfplaydrive bench [overrides] [json=true] [-m]``; ``--json`` is short for ``json=true``."""
+    argv = ["json=true" if a == "--json" else a for a in argv]
+    return run_hydra("bench", bench_task, argv, usage_errors=(ValueError,))

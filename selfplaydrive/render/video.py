@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -156,9 +157,10 @@ def render_episode(
     waypoints: bool = True,
     text: bool = True,
     deterministic: bool = True,
+    env: Any = None,
 ) -> dict[str, object]:
-    """Build an env on `map_spec`, drive it with `driver` for `steps` steps, draw world `world`
-    and write `output` (.png frames, .gif or .mp4).
+    """Build an env on `map_spec` (or take `env`), drive it with `driver` for `steps` steps,
+    draw world `world` and write `output` (.png frames, .gif or .mp4).
 
     Args:
         output: Output file (suffix picks the format, see `write_video`).
@@ -173,6 +175,9 @@ def render_episode(
         size, view, tail, waypoints, text: `EpisodeRenderer` arguments.
         every: Keep every `every`-th frame.
         deterministic: Checkpoint policies take the most likely action.
+        env: A `VecEnv` to drive instead of building one with `make_env(map_spec,
+            num_worlds)` (`selfplaydrive render` passes the env of its Hydra config); it is
+            reset with `seed`.
 
     Returns:
         {"files": written paths, "frames": count, "record_s": seconds stepping the env,
@@ -193,7 +198,10 @@ def render_episode(
     renderer_args["text"] = text
     if int(world) != world or world < 0:
         raise ValueError(f"world: expected an integer >= 0, got {world!r}")
-    env = make_env(map_spec, num_worlds=num_worlds or world + 1, seed=seed)
+    if env is None:
+        env = make_env(map_spec, num_worlds=num_worlds or world + 1, seed=seed)
+    elif world >= env.num_worlds:
+        raise ValueError(f"world: expected a world in [0, {env.num_worlds}) (env.num_worlds), got {world!r}")
     if follow is not None and not 0 <= follow < env.agents_per_world:
         raise ValueError(f"follow: expected an agent slot in [0, {env.agents_per_world}), got {follow!r}")
     policy = make_policy(driver, env, seed=seed, deterministic=deterministic)
@@ -211,78 +219,3 @@ def render_episode(
         "render_s": t2 - t1,
         "render_fps": count / max(t2 - t1, 1e-9),
     }
-
-
-def _parser():
-    import argparse
-
-    p = argparse.ArgumentParser(
-        prog="selfplaydrive render",
-        description="Drive an episode and draw one world top-down to PNG frames, a GIF or an MP4.",
-    )
-    p.add_argument(
-        "--map", default="default", help="map spec: default, a .osm/.xodr/.npz path, procedural:seed=S"
-    )
-    p.add_argument(
-        "--driver", default="rule_based", help="rule_based, random, static or a checkpoint .pt path"
-    )
-    p.add_argument("--steps", type=int, default=200, help="env steps of 0.1 s (default 200 = 20 s)")
-    p.add_argument("--world", type=int, default=0, help="world to draw (default 0)")
-    p.add_argument("--num-worlds", type=int, default=None, help="worlds in the env (default world + 1)")
-    p.add_argument(
-        "-o", "--output", default="episode.gif", help="out.gif, out.mp4 or out.png (frames out_0000.png ...)"
-    )
-    p.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10 = real time)")
-    p.add_argument("--follow", type=int, default=None, metavar="AGENT", help="camera follows this agent slot")
-    p.add_argument("--seed", type=int, default=0, help="seed of the env reset and the random driver")
-    p.add_argument("--size", type=int, default=800, help="image edge in pixels (default 800)")
-    p.add_argument(
-        "--view", type=float, default=None, help="camera window edge [m] (default 200, 80 following)"
-    )
-    p.add_argument("--tail", type=int, default=30, help="trajectory tail length in steps (default 30)")
-    p.add_argument("--every", type=int, default=1, help="keep every K-th frame (default 1)")
-    p.add_argument("--no-waypoints", action="store_true", help="do not draw waypoints")
-    p.add_argument("--no-text", action="store_true", help="no time stamp, event counts, scale bar")
-    p.add_argument("--stochastic", action="store_true", help="checkpoints sample actions instead of argmax")
-    return p
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``selfplaydrive render ...``; returns the exit code (0 ok, 1 map/config error, 2 bad usage)."""
-    import sys
-
-    from selfplaydrive.errors import ConfigError, MapError
-
-    args = _parser().parse_args(argv)
-    try:
-        out = render_episode(
-            args.output,
-            map_spec=args.map,
-            driver=args.driver,
-            steps=args.steps,
-            world=args.world,
-            num_worlds=args.num_worlds,
-            seed=args.seed,
-            fps=args.fps,
-            follow=args.follow,
-            size=args.size,
-            view=args.view,
-            tail=args.tail,
-            every=args.every,
-            waypoints=not args.no_waypoints,
-            text=not args.no_text,
-            deterministic=not args.stochastic,
-        )
-    except (MapError, ConfigError) as exc:
-        print(f"selfplaydrive render: error: {exc}", file=sys.stderr)
-        return 1
-    except (ValueError, RuntimeError) as exc:
-        print(f"selfplaydrive render: error: {exc}", file=sys.stderr)
-        return 2
-    files = out["files"]
-    where = files[0] if len(files) == 1 else f"{files[0]} ... {files[-1]}"
-    print(
-        f"wrote {out['frames']} frames to {where} (stepping {out['record_s']:.1f} s, "
-        f"drawing and writing {out['render_s']:.1f} s = {out['render_fps']:.1f} frames/s)"
-    )
-    return 0

@@ -3,10 +3,14 @@
 Steps `worlds` x 32 agents (about 1,000 agents) with the friction bicycle model, 63 objects
 and 200 road segments observed, at each requested thread count, and prints agent-steps/s and
 agent-steps per CPU second, the time per stage (physics, events, reward, observation,
-finalize, reset), the reset time per world and the buffer bytes per world. The CLI exposes it
-as `selfplaydrive bench [--json] [--map PATH]`; JSON keys: map, num_agents, obs_dim, results
-(list of {threads, agent_steps_per_s, agent_steps_per_cpu_s}), stage_ms_per_step,
-reset_ms_per_world, bytes_per_world.
+finalize, reset), the reset time per world and the buffer bytes per world. JSON keys: map,
+num_agents, obs_dim, results (list of {threads, agent_steps_per_s, agent_steps_per_cpu_s}),
+stage_ms_per_step, reset_ms_per_world, bytes_per_world.
+
+`selfplaydrive bench [overrides] [json=true] [-m]` runs `run_bench` on an env built from the
+Hydra config `conf/bench.yaml` (selfplaydrive/hydra_app.py); `main` below is the argparse
+front end of `python benchmarks/bench_sim.py [--json] [--map PATH] ...` (paper configuration,
+map spec only).
 """
 
 from __future__ import annotations
@@ -14,7 +18,8 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -60,10 +65,12 @@ def _run(env, steps: int, warmup: int, seed: int) -> tuple[float, float]:
     return agent_steps / wall, agent_steps / max(cpu, 1e-9)
 
 
-def _stage_times(road_map, args, threads: int) -> dict[str, float]:
-    env = _make_env(road_map, args.worlds, threads, args.seed, profile=True)
-    _run(env, args.steps, args.warmup, args.seed)
-    total_steps = args.steps + args.warmup
+def _stage_times(
+    make_env: Callable[[int, bool], Any], threads: int, steps: int, warmup: int, seed: int
+) -> dict[str, float]:
+    env = make_env(threads, True)
+    _run(env, steps, warmup, seed)
+    total_steps = steps + warmup
     return {k: v / total_steps * 1e3 for k, v in env.timings.items()}  # ms per step
 
 
@@ -73,37 +80,71 @@ def main(argv: Sequence[str] | None = None) -> dict[str, object]:
 
     args = _parse(argv)
     road_map = load_map(args.map)
-    results, stages = [], {}
-    env = None
-    for threads in [int(t) for t in args.threads.split(",")]:
-        env = _make_env(road_map, args.worlds, threads, args.seed, profile=False)
-        runs = [_run(env, args.steps, args.warmup, args.seed) for _ in range(max(1, args.repeats))]
-        # wall-clock is what a trainer sees; per CPU second is steadier on a shared machine
-        results.append(
-            {
-                "threads": threads,
-                "agent_steps_per_s": round(max(r[0] for r in runs), 1),
-                "agent_steps_per_cpu_s": round(max(r[1] for r in runs), 1),
-            }
-        )
-        if not args.no_stages:
-            stages[threads] = _stage_times(road_map, args, threads)
-    assert env is not None
-    reset_ms = _reset_time(env)
-    out = {
-        "map": str(args.map),
-        "num_agents": env.num_agents,
-        "obs_dim": env.layout.obs_dim,
-        "results": results,
-        "stage_ms_per_step": stages,
-        "reset_ms_per_world": reset_ms,
-        "bytes_per_world": _bytes_per_world(env),
-    }
+
+    def make_env(threads: int, profile: bool):
+        return _make_env(road_map, args.worlds, threads, args.seed, profile=profile)
+
+    threads = [int(t) for t in args.threads.split(",")]
+    out = run_bench(
+        make_env, str(args.map), threads, args.steps, args.warmup, args.repeats, args.seed, not args.no_stages
+    )
     if args.json:
         print(json.dumps(out))
     else:
         _print_text(out)
     return out
+
+
+def run_bench(
+    make_env: Callable[[int, bool], Any],
+    map_name: str,
+    threads: Sequence[int] = (1, 2),
+    steps: int = 300,
+    warmup: int = 30,
+    repeats: int = 3,
+    seed: int = 0,
+    stages: bool = True,
+) -> dict[str, object]:
+    """Time `steps` random-action steps of `make_env(threads, profile)` at each thread count.
+
+    Args:
+        make_env: Builds the env stepped: (num_threads, profile) -> `VecEnv`.
+        map_name: What the output's "map" says.
+        threads: Thread counts, each timed `repeats` times (the best run is reported).
+        steps, warmup: Timed and untimed steps per run.
+        seed: Seed of the resets and of the random actions.
+        stages: Also time each stage (one extra profiled run per thread count).
+
+    Returns:
+        The JSON object described in the module docstring.
+    """
+    results, stage_ms = [], {}
+    env = None
+    for num_threads in threads:
+        env = make_env(int(num_threads), False)
+        runs = [_run(env, steps, warmup, seed) for _ in range(max(1, repeats))]
+        # wall-clock is what a trainer sees; per CPU second is steadier on a shared machine
+        results.append(
+            {
+                "threads": int(num_threads),
+                "agent_steps_per_s": round(max(r[0] for r in runs), 1),
+                "agent_steps_per_cpu_s": round(max(r[1] for r in runs), 1),
+            }
+        )
+        if stages:
+            stage_ms[int(num_threads)] = _stage_times(make_env, int(num_threads), steps, warmup, seed)
+    if env is None:
+        raise ValueError(f"threads: expected at least one thread count, got {threads!r}")
+    reset_ms = _reset_time(env)
+    return {
+        "map": map_name,
+        "num_agents": env.num_agents,
+        "obs_dim": env.layout.obs_dim,
+        "results": results,
+        "stage_ms_per_step": stage_ms,
+        "reset_ms_per_world": reset_ms,
+        "bytes_per_world": _bytes_per_world(env),
+    }
 
 
 def _reset_time(env) -> dict[str, float]:

@@ -3,7 +3,8 @@
 Run folder layout (rank 0 writes the shared files; every rank its own checkpoints):
     config.json        the `PPOConfig` used
     run_info.json      seed, world size, device, git commit, env and model sizes, versions
-    tb/                TensorBoard event files (losses, SPS, returns, reward terms, events/km)
+    tb/                TensorBoard event files (losses, SPS, returns, reward terms, events/km);
+                       with logger=jsonl metrics.jsonl instead, with logger=none nothing
     checkpoints/       ckpt_<update>.pt (periodic, pruned), final.pt
     eval.json          the final evaluation summary (also printed)
 """
@@ -14,14 +15,16 @@ import json
 import math
 import platform
 import subprocess
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import torch
 from torch import nn
 
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.config import PPOConfig
-from selfplaydrive.trainers.ppo.logging import RunLogger
+from selfplaydrive.trainers.ppo.logging import Logger, TensorBoardLogger
 from selfplaydrive.trainers.ppo.trainer import PPOTrainer
 
 EVAL_SEED_OFFSET = 1_000_003  # evaluation episodes never reuse the training seed's worlds
@@ -43,6 +46,7 @@ def train_run(
     config: PPOConfig | dict,
     run_dir: str | Path,
     resume: bool | str | Path = False,
+    logger: Callable[..., Logger] | Mapping[str, Any] | None = None,
 ) -> dict[str, object]:
     """Train `model` on `env` with PPO, writing the run folder; returns the evaluation summary.
 
@@ -53,6 +57,11 @@ def train_run(
         run_dir: Run folder (created).
         resume: True continues from the newest checkpoint in `run_dir/checkpoints` (an error
             when there is none); a path continues from that checkpoint.
+        logger: Where scalars go: a factory called with the keyword arguments
+            `run_dir, total_updates, progress_bar, enabled, initial` (e.g. `JsonlLogger`, or
+            what `instantiate(cfg.logger)` returns for a `logger/` config), or a config node
+            with a `_target_` (instantiated as a partial). None: `TensorBoardLogger` into
+            `run_dir/tb` (the `logger=tensorboard` default).
 
     Returns:
         {"updates", "agent_steps", "eval": summary dict (see `write_summary`)}.
@@ -68,7 +77,13 @@ def train_run(
     elif main:
         _write_json(run_dir / "config.json", cfg.to_dict())
         _write_json(run_dir / "run_info.json", run_info(env, model, trainer))
-    logger = RunLogger(run_dir, trainer.total_updates, cfg.progress_bar, main, trainer.update_idx)
+    logger = make_logger(logger)(
+        run_dir=run_dir,
+        total_updates=trainer.total_updates,
+        progress_bar=cfg.progress_bar,
+        enabled=main,
+        initial=trainer.update_idx,
+    )
     try:
         trainer.train(logger=logger)
         final = run_dir / "checkpoints" / ("final.pt" if main else f"final.rank{trainer.dist.rank}.pt")
@@ -84,6 +99,21 @@ def train_run(
     return {"updates": trainer.update_idx, "agent_steps": trainer.agent_steps, "eval": summary}
 
 
+def make_logger(spec: Callable[..., Logger] | Mapping[str, Any] | None) -> Callable[..., Logger]:
+    """The logger factory of `train_run`'s `logger` argument (see there)."""
+    if spec is None:
+        return TensorBoardLogger
+    if isinstance(spec, Mapping):  # a dict or DictConfig node
+        from selfplaydrive.builder import instantiate
+
+        return instantiate(spec, _partial_=True)
+    if not callable(spec):
+        raise TypeError(
+            f"logger: expected a logger factory, a config node with _target_ or None, got {spec!r}"
+        )
+    return spec
+
+
 def _resume_path(run_dir: Path, resume: bool | str | Path, rank: int) -> Path:
     if resume is True:
         path = ckpt.latest(run_dir / "checkpoints", rank)
@@ -93,7 +123,7 @@ def _resume_path(run_dir: Path, resume: bool | str | Path, rank: int) -> Path:
     return Path(resume)
 
 
-def write_summary(run_dir: Path, summary: dict[str, float], logger: RunLogger | None = None) -> None:
+def write_summary(run_dir: Path, summary: dict[str, float], logger: Logger | None = None) -> None:
     """Print the short evaluation summary and save every metric to `run_dir/eval.json`."""
     _write_json(run_dir / "eval.json", summary)
     shown = ", ".join(

@@ -11,7 +11,8 @@ Run folder (next to Hydra's resolved_config.yaml and run_meta.json):
     sb3_config.json    the `SB3Trainer` arguments used
     tb/                SB3's TensorBoard scalars (rollout/, train/) plus the episode metrics of
                        the native env under the PPO trainer's tag names (term/<name>,
-                       charts/waypoint_completion, charts/collision_rate, ...)
+                       charts/waypoint_completion, charts/collision_rate, ...); the `logger`
+                       group picks where they go (logger=jsonl: metrics.jsonl; none: nowhere)
     model.zip          `stable_baselines3.PPO.save` (load with `PPO.load`)
     eval.json          evaluation summary (waypoint completion, collision / off-road rates, ...)
 """
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -29,6 +31,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import KVWriter
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import Tensor, nn
 
@@ -112,6 +115,27 @@ class EpisodeMetricsCallback(BaseCallback):
                 self.logger.record(key if "/" in key else f"charts/{key}", value)
         if records:
             self.last = metrics
+
+
+class LoggerWriter(KVWriter):
+    """An SB3 output format that hands each dump of SB3's logger (once per rollout) to a
+    library logger (`trainers/ppo/logging.py`): `scalars(values, step)` with SB3's keys as tags
+    (keys SB3 keeps out of TensorBoard are left out), then `progress(1, values)`."""
+
+    def __init__(self, logger: Any) -> None:
+        self.logger = logger
+
+    def write(self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0) -> None:
+        values = {
+            k: v
+            for k, v in key_values.items()
+            if not (key_excluded.get(k) and "tensorboard" in key_excluded[k])
+        }
+        self.logger.scalars(values, step)
+        self.logger.progress(1, values)
+
+    def close(self) -> None:
+        self.logger.close()
 
 
 class SB3Trainer:
@@ -246,20 +270,25 @@ class SB3Trainer:
             verbose=self.verbose,
         )
 
-    def run(self, env, cfg: Any, run_dir: str | Path) -> dict[str, Any]:
+    def run(self, env, cfg: Any, run_dir: str | Path, logger: Any = None) -> dict[str, Any]:
         """Train on the native `env`, save the model and the evaluation to `run_dir`.
 
         Args:
             env: A `selfplaydrive.sim.VecEnv` (any action table: SB3 handles both).
             cfg: The composed config (unused beyond what Hydra already wrote to the folder).
             run_dir: Run folder (created).
+            logger: Where SB3's scalars go: a logger factory or config node as for
+                `trainers.run.train_run` (`instantiate(cfg.logger)`); None: TensorBoard in
+                `run_dir/tb`. Its progress bar stays off (`progress_bar` is SB3's own bar).
 
         Returns:
             {"agent_steps", "model_path", "eval": summary dict (empty when eval_episodes = 0)}.
         """
-        from stable_baselines3.common.logger import configure
+        from stable_baselines3.common.logger import HumanOutputFormat
+        from stable_baselines3.common.logger import Logger as SB3Logger
 
         from selfplaydrive.env import SB3VecEnv
+        from selfplaydrive.trainers.run import make_logger
 
         run_dir = Path(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -268,9 +297,19 @@ class SB3Trainer:
         _write_json(run_dir / "sb3_config.json", self.to_dict())
         venv = SB3VecEnv(env, seed=self.seed)
         model = self.build(venv)
-        model.set_logger(configure(str(run_dir / "tb"), ["tensorboard", "csv"]))
+        rollouts = math.ceil(self.total_timesteps / (self.n_steps * venv.num_envs))
+        log = make_logger(logger)(
+            run_dir=run_dir, total_updates=rollouts, progress_bar=False, enabled=True, initial=0
+        )
+        formats: list[KVWriter] = [LoggerWriter(log)]
+        if self.verbose:
+            formats.append(HumanOutputFormat(sys.stdout))  # SB3's rollout/train tables
+        model.set_logger(SB3Logger(str(run_dir), formats))
         callback = EpisodeMetricsCallback(env)
-        model.learn(self.total_timesteps, callback=callback, progress_bar=self.progress_bar)
+        try:
+            model.learn(self.total_timesteps, callback=callback, progress_bar=self.progress_bar)
+        finally:
+            log.close()
         model_path = run_dir / "model.zip"
         model.save(model_path)
         print(f"sb3: {model.num_timesteps} slot-steps, model saved to {model_path}")

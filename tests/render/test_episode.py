@@ -14,7 +14,7 @@ from selfplaydrive.builder import make_env
 from selfplaydrive.render.episode import LIGHT_COLORS, STATUS_COLORS, EpisodeRenderer, box_corners
 from selfplaydrive.render.policies import infer_model_spec, make_policy
 from selfplaydrive.render.record import record_episode
-from selfplaydrive.render.video import has_mp4, main, png_paths, write_video
+from selfplaydrive.render.video import has_mp4, png_paths, write_video
 
 SIZE = 200  # [px] small frames keep the tests fast; 1 px per metre over the 200 m region
 STEPS = 4
@@ -196,15 +196,18 @@ def test_bad_arguments_are_named(rule_rec, tmp_path, env):
 
 
 def test_cli_writes_gif_and_reports_errors(tmp_path, capsys):
+    from selfplaydrive.cli import main
+
     out = tmp_path / "cli.gif"
-    assert main(["--steps", "2", "-o", str(out), "--size", "128", "--driver", "random"]) == 0
+    run = f"hydra.run.dir={tmp_path / 'run'}"
+    assert main(["render", "steps=2", f"output={out}", "size=128", "driver=random", run]) == 0
     with Image.open(out) as im:
         assert im.n_frames == 3 and im.size == (128, 128)
     assert "wrote 3 frames" in capsys.readouterr().out
-    assert main(["--steps", "1", "-o", str(tmp_path / "x.txt")]) == 2
+    assert main(["render", "steps=1", f"output={tmp_path / 'x.txt'}", run]) == 2
     assert "expected a file ending in" in capsys.readouterr().err
     if not has_mp4():
-        assert main(["--steps", "1", "-o", str(tmp_path / "x.mp4")]) == 2
+        assert main(["render", "steps=1", f"output={tmp_path / 'x.mp4'}", run]) == 2
         assert "imageio-ffmpeg" in capsys.readouterr().err
 
 

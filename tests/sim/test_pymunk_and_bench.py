@@ -63,9 +63,9 @@ def test_pymunk_friction_circle_understeers(straight_map):
     assert 0.0 < slip[-1, 2] < grip[-1, 2]
 
 
-def test_bench_cli_json_keys():
-    cmd = [sys.executable, "-m", "selfplaydrive.cli", "bench", "--json", "--worlds", "2", "--steps", "3"]
-    cmd += ["--warmup", "1", "--threads", "1,2", "--repeats", "1", "--no-stages"]
+def test_bench_cli_json_keys(tmp_path):
+    cmd = [sys.executable, "-m", "selfplaydrive.cli", "bench", "--json", "env.num_worlds=2", "steps=3"]
+    cmd += ["warmup=1", "threads=[1,2]", "repeats=1", "stages=false", f"hydra.run.dir={tmp_path}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -75,10 +75,12 @@ def test_bench_cli_json_keys():
     assert all(r["agent_steps_per_s"] > 0 and r["agent_steps_per_cpu_s"] > 0 for r in out["results"])
     assert out["reset_ms_per_world"]["pack_and_kernels"] > 0
     assert 0 < out["bytes_per_world"] < 1_000_000
+    assert json.loads((tmp_path / "bench.json").read_text()) == out
 
 
-def test_bench_cli_bad_map_exits_1():
-    cmd = [sys.executable, "-m", "selfplaydrive.cli", "bench", "--map", "/nonexistent/x.osm"]
+def test_bench_cli_bad_map_exits_1(tmp_path):
+    cmd = [sys.executable, "-m", "selfplaydrive.cli", "bench", "map=file", "map.spec=/nonexistent/x.osm"]
+    cmd += [f"hydra.run.dir={tmp_path}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1
     assert "x.osm" in proc.stderr

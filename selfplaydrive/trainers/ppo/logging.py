@@ -1,18 +1,63 @@
-"""Run logging: TensorBoard scalars and a tqdm progress bar (rank 0 of a job only)."""
+"""Run loggers: where a training run's scalars go (rank 0 of a job only).
+
+Every logger shows the tqdm progress bar and prints text lines; they differ in where scalars go:
+
+| config (`logger=`) | class | scalars written to |
+|---|---|---|
+| `tensorboard` (default) | `TensorBoardLogger` (= `RunLogger`) | `<run_dir>/tb/` event files |
+| `jsonl` | `JsonlLogger` | `<run_dir>/metrics.jsonl`, a JSON line per `scalars` call |
+| `none` | `ProgressLogger` | nowhere (progress bar and text only) |
+
+The contract the trainers use is small: `scalars(values, step)`, `progress(updates, values)`,
+`text(message)`, `close()`. A logger of your own needs only those four methods and a
+constructor taking the keyword arguments in `LOGGER_ARGS`, which the trainer fills at run
+time (the config lists only the other arguments, with `_partial_: true`).
+"""
 
 from __future__ import annotations
 
+import json
 import math
+import time
 from pathlib import Path
+from typing import Any, Protocol
 
 PROGRESS_KEYS = ("sps", "return_mean", "waypoint_completion")
+# constructor arguments every logger takes from the trainer, never from YAML
+LOGGER_ARGS = ("run_dir", "total_updates", "progress_bar", "enabled", "initial")
 
 
-class RunLogger:
-    """Writes scalars to `<run_dir>/tb` and shows a progress bar over updates.
+class Logger(Protocol):
+    """What a trainer calls on its logger."""
+
+    def scalars(self, values: dict[str, float], step: int) -> None: ...
+
+    def progress(self, updates: int, values: dict[str, float]) -> None: ...
+
+    def text(self, message: str) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def scalar_tags(values: dict[str, Any]) -> dict[str, float]:
+    """The finite numeric values of `values` under their tag names: keys with a slash keep
+    their group (`losses/policy`), others go under `charts/` (`sps` -> `charts/sps`)."""
+    out = {}
+    for key, value in values.items():
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            continue  # SB3 records a few strings; they are not scalars
+        if math.isfinite(v):
+            out[key if "/" in key else f"charts/{key}"] = v
+    return out
+
+
+class ProgressLogger:
+    """`logger=none`: the progress bar and text lines, no scalar files.
 
     Args:
-        run_dir: Run folder; None writes no TensorBoard file.
+        run_dir: Run folder (unused here; subclasses write into it).
         total_updates: Length of the progress bar.
         progress_bar: Show the bar (tqdm on stderr; its ETA follows the update rate).
         enabled: False on ranks other than 0: every method does nothing.
@@ -21,43 +66,38 @@ class RunLogger:
 
     def __init__(
         self,
-        run_dir: str | Path | None,
-        total_updates: int,
+        run_dir: str | Path | None = None,
+        total_updates: int = 0,
         progress_bar: bool = True,
         enabled: bool = True,
         initial: int = 0,
     ) -> None:
         self.enabled = enabled
-        self.writer = None
+        self.run_dir = None if run_dir is None else Path(run_dir)
         self.bar = None
-        if not enabled:
-            return
-        if run_dir is not None:
-            from torch.utils.tensorboard import SummaryWriter
-
-            self.writer = SummaryWriter(log_dir=str(Path(run_dir) / "tb"))
-        if progress_bar:
+        if enabled and progress_bar:
             from tqdm.auto import tqdm
 
             self.bar = tqdm(total=total_updates, initial=initial, unit="update", dynamic_ncols=True)
 
     def scalars(self, values: dict[str, float], step: int) -> None:
-        """Write every finite value as a scalar at `step` (global slot-step count).
+        """Write every finite value as a scalar at `step` (global slot-step count); see
+        `scalar_tags` for the tag names."""
+        if self.enabled:
+            tags = scalar_tags(values)
+            if tags:
+                self._write(tags, int(step))
 
-        Keys with a slash keep their group (`losses/policy`); others go under `charts/`."""
-        if self.writer is None:
-            return
-        for key, value in values.items():
-            if value is None or not math.isfinite(float(value)):
-                continue
-            tag = key if "/" in key else f"charts/{key}"
-            self.writer.add_scalar(tag, float(value), step)
+    def _write(self, tags: dict[str, float], step: int) -> None:
+        """Store `tags` at `step` (nothing here)."""
 
     def progress(self, updates: int, values: dict[str, float]) -> None:
         """Advance the bar by `updates` and show SPS, return and waypoint completion."""
         if self.bar is None:
             return
-        shown = {k: f"{values[k]:.3g}" for k in PROGRESS_KEYS if k in values and math.isfinite(values[k])}
+        shown = {
+            k: f"{float(values[k]):.3g}" for k in PROGRESS_KEYS if k in values and math.isfinite(values[k])
+        }
         self.bar.set_postfix(shown, refresh=False)
         self.bar.update(updates)
 
@@ -71,8 +111,91 @@ class RunLogger:
             print(message)
 
     def close(self) -> None:
+        """Close the bar and flush what was written."""
         if self.bar is not None:
             self.bar.close()
+            self.bar = None
+
+
+class TensorBoardLogger(ProgressLogger):
+    """`logger=tensorboard` (the default): scalars to TensorBoard event files in
+    `<run_dir>/<subdir>`, plus the progress bar.
+
+    Args:
+        subdir: Folder inside the run folder for the event files.
+        flush_secs: Seconds between flushes of the event file to disk.
+        run_dir, total_updates, progress_bar, enabled, initial: see `ProgressLogger`
+            (`run_dir=None` writes no event file).
+    """
+
+    def __init__(
+        self,
+        run_dir: str | Path | None = None,
+        total_updates: int = 0,
+        progress_bar: bool = True,
+        enabled: bool = True,
+        initial: int = 0,
+        subdir: str = "tb",
+        flush_secs: float = 120.0,
+    ) -> None:
+        super().__init__(run_dir, total_updates, progress_bar, enabled, initial)
+        self.writer = None
+        if enabled and run_dir is not None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(log_dir=str(Path(run_dir) / subdir), flush_secs=int(flush_secs))
+
+    def _write(self, tags: dict[str, float], step: int) -> None:
+        if self.writer is not None:
+            for tag, value in tags.items():
+                self.writer.add_scalar(tag, value, step)
+
+    def close(self) -> None:
+        super().close()
         if self.writer is not None:
             self.writer.flush()
             self.writer.close()
+            self.writer = None
+
+
+RunLogger = TensorBoardLogger  # the name the trainers used before the logger group existed
+
+
+class JsonlLogger(ProgressLogger):
+    """`logger=jsonl`: scalars appended as JSON lines to `<run_dir>/<filename>`, plus the
+    progress bar. Each line is `{"step": slot-steps, "time": unix seconds, "<tag>": value, ...}`
+    with the same tag names as TensorBoard (`charts/sps`, `losses/policy`, `term/collision` ...),
+    so it needs no TensorBoard to read: `pandas.read_json(path, lines=True)`.
+
+    Args:
+        filename: File inside the run folder (appended to, so a resumed run continues it).
+        run_dir, total_updates, progress_bar, enabled, initial: see `ProgressLogger`
+            (`run_dir=None` writes no file).
+    """
+
+    def __init__(
+        self,
+        run_dir: str | Path | None = None,
+        total_updates: int = 0,
+        progress_bar: bool = True,
+        enabled: bool = True,
+        initial: int = 0,
+        filename: str = "metrics.jsonl",
+    ) -> None:
+        super().__init__(run_dir, total_updates, progress_bar, enabled, initial)
+        self.file = None
+        if enabled and run_dir is not None:
+            path = Path(run_dir) / filename
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.file = path.open("a", encoding="utf-8")
+
+    def _write(self, tags: dict[str, float], step: int) -> None:
+        if self.file is not None:
+            self.file.write(json.dumps({"step": step, "time": round(time.time(), 3), **tags}) + "\n")
+            self.file.flush()
+
+    def close(self) -> None:
+        super().close()
+        if self.file is not None:
+            self.file.close()
+            self.file = None
