@@ -111,8 +111,8 @@ def test_unknown_option_lists_choices():
     [
         ("train", "logger=nope", "valid options for 'logger': jsonl, none, tensorboard"),
         ("train", "logger.subdirr=x", "valid keys under 'logger': _partial_, _target_, flush_secs, subdir"),
-        ("train", "model=nope", "valid options for 'model': deepsets, transformer"),
-        ("train", "trainer=nope", "valid options for 'trainer': ppo, sb3"),
+        ("train", "model=nope", "valid options for 'model': deepsets, deepsets_laptop, transformer"),
+        ("train", "trainer=nope", "valid options for 'trainer': ppo, ppo_laptop, sb3"),
         ("train", "experiment=nope", "valid options for 'experiment': ablate_collision, ablate_friction"),
         ("eval", "eval=nope", "valid options for 'eval': paper, quick"),
         ("render", "drivr=random", "valid keys under '<root>': deterministic, driver, env"),

@@ -90,9 +90,6 @@ NO_KERNEL_EFFECT = {
     # the Tartu map needs $SELFPLAYDRIVE_SHARED_MAPS; its one key is load_map's spec, tested
     # under map=default and map=file
     ("map", "tartu", "map.spec"): "needs the shared maps; same key as map=file",
-    # PymunkModel scales every force with the mass, so the motion does not depend on it
-    # (documented in its docstring); the bodies need a mass all the same
-    ("physics", "pymunk", "physics.model.mass"): "forces scale with the mass; the motion does not",
 }
 
 # Keys that act only in some situations, with the other keys set so that the situation occurs

@@ -242,6 +242,31 @@ def reset_state(state: State, episode_start: Tensor) -> State:
 # MultiDiscrete action distribution (section 2.4): independent categoricals, one per dimension.
 
 
+def middle_prior_bias(nvec: Sequence[int], strength: float) -> Tensor:
+    """Initial actor bias that favours the middle choice of every action dimension.
+
+    Choice i of a dimension with n choices gets the logit `-strength * ((i - c) / c) ** 2`,
+    c = (n - 1) / 2. In the paper's symmetric tables (section 2.4) the middle choices are zero
+    acceleration and zero steering, so the untrained policy mostly keeps its speed and heading
+    instead of braking and swerving at random; 0 gives the uniform initial policy.
+
+    Args:
+        nvec: Choices per action dimension.
+        strength: Logit gap between the middle and the outermost choices (>= 0).
+
+    Returns:
+        (sum(nvec),) float32 bias.
+    """
+    if not strength >= 0:
+        raise ValueError(f"action_prior: expected a logit gap >= 0, got {strength!r}")
+    parts = []
+    for n in nvec:
+        c = (n - 1) / 2
+        offset = (torch.arange(n, dtype=torch.float32) - c) / max(c, 1.0)
+        parts.append(-float(strength) * offset * offset)
+    return torch.cat(parts)
+
+
 def split_logits(logits: Tensor, nvec: Sequence[int]) -> list[Tensor]:
     """Split (..., sum(nvec)) logits into one (..., n_i) tensor per action dimension."""
     if logits.shape[-1] != sum(nvec):

@@ -22,6 +22,7 @@ from selfplaydrive.models.common import (
     check_nvec,
     check_positive,
     compact_sets,
+    middle_prior_bias,
     masked_max,
     reset_state,
 )
@@ -52,6 +53,8 @@ class DeepSetsModel(nn.Module):
         hidden_size: Width of the shared MLP output, the LSTM input (256).
         lstm_size: LSTM hidden size (256).
         compact: Drop all-padding slots before encoding (exact; faster for sparse scenes).
+        action_prior: Initial actor bias towards the middle action choices (zero acceleration
+            and steering), as a logit gap (`middle_prior_bias`); 0 starts uniform, as PufferLib.
     """
 
     is_recurrent = True
@@ -64,6 +67,7 @@ class DeepSetsModel(nn.Module):
         hidden_size: int = 256,
         lstm_size: int = 256,
         compact: bool = True,
+        action_prior: float = 0.0,
     ) -> None:
         super().__init__()
         self.nvec = check_nvec(action_nvec)
@@ -81,6 +85,8 @@ class DeepSetsModel(nn.Module):
         self.actor = nn.Linear(lstm_size, sum(self.nvec))
         self.critic = nn.Linear(lstm_size, 1)
         self._init_weights()
+        with torch.no_grad():
+            self.actor.bias.copy_(middle_prior_bias(self.nvec, action_prior))
 
     def _init_weights(self) -> None:
         # PufferLib-style init: orthogonal sqrt(2) trunk, small actor (near-uniform initial policy),

@@ -23,6 +23,7 @@ from selfplaydrive.models.common import (
     check_nvec,
     check_positive,
     compact_sets,
+    middle_prior_bias,
     mlp,
 )
 from selfplaydrive.sim.layout import ObsLayout
@@ -100,6 +101,8 @@ class TransformerModel(nn.Module):
         ffn_size: Feed-forward hidden width (512 = 4 D).
         film_hidden: Hidden width of the FiLM MLP on the reward coefficients (128).
         compact: Drop all-padding slots before encoding (exact; faster for sparse scenes).
+        action_prior: Initial actor bias towards the middle action choices (zero acceleration
+            and steering), as a logit gap (`middle_prior_bias`); 0 starts uniform, as PufferLib.
     """
 
     is_recurrent = False
@@ -115,6 +118,7 @@ class TransformerModel(nn.Module):
         ffn_size: int = 512,
         film_hidden: int = 128,
         compact: bool = True,
+        action_prior: float = 0.0,
     ) -> None:
         super().__init__()
         self.nvec = check_nvec(action_nvec)
@@ -142,6 +146,8 @@ class TransformerModel(nn.Module):
         self.actor = nn.Linear(d, sum(self.nvec))
         self.critic = nn.Linear(d, 1)
         self._init_weights()
+        with torch.no_grad():
+            self.actor.bias.copy_(middle_prior_bias(self.nvec, action_prior))
 
     def _init_weights(self) -> None:
         nn.init.normal_(self.modality, std=0.02)

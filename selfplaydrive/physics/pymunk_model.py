@@ -37,6 +37,9 @@ from selfplaydrive.physics.models import BicycleModel
 PHYS_EXTERNAL = 2  # _sim/common.pxd: the kernel leaves the dynamics to Python
 
 
+VEHICLE_MASS = 1500.0  # [kg]; cancels out of the motion (see PymunkModel)
+
+
 class PymunkModel(BicycleModel):
     """Rigid-body vehicles in a pymunk space driven by bicycle-like tire forces.
 
@@ -44,7 +47,10 @@ class PymunkModel(BicycleModel):
         wheelbase_ratio: Wheelbase / box length.
         max_speed: Speed clamp [m/s].
         gravity: g of the friction circle [m/s^2].
-        mass: Vehicle mass [kg] (forces scale with it; the motion does not).
+
+    Every vehicle has the same mass (`VEHICLE_MASS`): the tire forces are computed from the
+    requested accelerations times the mass, so the mass cancels out of the motion and is not a
+    parameter (a key that changes nothing would be a silently ignored setting).
     """
 
     kernel = PHYS_EXTERNAL
@@ -55,18 +61,15 @@ class PymunkModel(BicycleModel):
         wheelbase_ratio: float = 0.6,
         max_speed: float = 40.0,
         gravity: float = 9.81,
-        mass: float = 1500.0,
     ) -> None:
         super().__init__(wheelbase_ratio, max_speed)
         if not (0 < gravity < 100):
             raise ConfigError(f"physics.gravity: expected a value in (0, 100) m/s^2, got {gravity!r}")
-        if not (0 < mass < 1e6):
-            raise ConfigError(f"physics.mass: expected a value in (0, 1e6) kg, got {mass!r}")
         import pymunk
 
         self._pymunk = pymunk
         self.gravity = float(gravity)
-        self.mass = float(mass)
+        self.mass = VEHICLE_MASS
         self._space = pymunk.Space()
         self._bodies: list = []
 

@@ -22,7 +22,13 @@ import time
 from pathlib import Path
 from typing import Any, Protocol
 
-PROGRESS_KEYS = ("sps", "return_mean", "waypoint_completion")
+# label on the progress bar -> metric keys, first present wins: the sliding window of recent
+# episodes (`recent/*`, PPOTrainer) is steadier than one update's few finished episodes
+PROGRESS_KEYS = {
+    "sps": ("sps",),
+    "return": ("recent/return_mean", "return_mean"),
+    "wp_completion": ("recent/waypoint_completion", "waypoint_completion"),
+}
 # constructor arguments every logger takes from the trainer, never from YAML
 LOGGER_ARGS = ("run_dir", "total_updates", "progress_bar", "enabled", "initial")
 
@@ -95,9 +101,11 @@ class ProgressLogger:
         """Advance the bar by `updates` and show SPS, return and waypoint completion."""
         if self.bar is None:
             return
-        shown = {
-            k: f"{float(values[k]):.3g}" for k in PROGRESS_KEYS if k in values and math.isfinite(values[k])
-        }
+        shown = {}
+        for label, keys in PROGRESS_KEYS.items():
+            found = [values[k] for k in keys if k in values and math.isfinite(values[k])]
+            if found:
+                shown[label] = f"{float(found[0]):.3g}"
         self.bar.set_postfix(shown, refresh=False)
         self.bar.update(updates)
 

@@ -9,6 +9,7 @@ Layout of the file, CleanRL style: setup, ROLLOUT, ADVANTAGES, UPDATE, bookkeepi
 from __future__ import annotations
 
 import time
+from collections import deque
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -36,6 +37,13 @@ def resolve_device(name: str, info: DistInfo) -> torch.device:
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise RuntimeError(f"PPOConfig.device = {name!r}, but torch sees no CUDA device")
     return torch.device(name)
+
+
+# The progress bar and the `recent/*` scalars summarise a sliding window of the last finished
+# world-episodes: with a laptop's handful of worlds, one update often ends none or one episode,
+# and the per-update numbers alone are too noisy to see learning in.
+RECENT_WORLD_EPISODES = 32
+RECENT_KEYS = ("waypoint_completion", "return_mean", "collision_rate", "offroad_rate", "km")
 
 
 def _index(state: State, idx: Tensor) -> State:
@@ -83,6 +91,8 @@ class PPOTrainer:
             config.rollout_length, self.num_slots, env.layout.obs_dim, len(nvec), self.device
         )
         self.tracker = EpisodeTracker(env)
+        self.recent: deque[dict[str, object]] = deque(maxlen=RECENT_WORLD_EPISODES)
+        self.recent_returns: deque[float] = deque(maxlen=RECENT_WORLD_EPISODES * env.agents_per_world)
         self.update_idx = 0
         self.global_step = 0  # slot-steps collected by this rank
         self.agent_steps = 0  # active agent-steps collected by this rank
@@ -280,6 +290,7 @@ class PPOTrainer:
             metrics.update(self._rates(self.agent_steps - steps0, t1 - t0, t2 - t0))
             records, returns = self.tracker.pop()
             metrics.update(summarize(records, returns))
+            metrics.update(self._recent(records, returns))
             if logger is not None:
                 if self.update_idx % cfg.log_interval == 0:
                     logger.scalars(metrics, self.global_step * self.dist.world_size)
@@ -287,6 +298,13 @@ class PPOTrainer:
             if cfg.checkpoint_interval and self.update_idx % cfg.checkpoint_interval == 0:
                 self.save_periodic()
         return metrics
+
+    def _recent(self, records: list[dict[str, object]], returns: list[float]) -> dict[str, float]:
+        """`recent/<key>` over the last `RECENT_WORLD_EPISODES` finished world-episodes."""
+        self.recent.extend(records)
+        self.recent_returns.extend(returns)
+        window = summarize(list(self.recent), list(self.recent_returns))
+        return {f"recent/{k}": window[k] for k in RECENT_KEYS if k in window}
 
     def _rates(self, agent_steps: int, t_collect: float, t_total: float) -> dict[str, float]:
         return {
@@ -334,6 +352,7 @@ class PPOTrainer:
             "next_start": self.next_start.cpu(),
             "needs_reset": self.needs_reset,
             "tracker": self.tracker.state_dict(),
+            "recent": (list(self.recent), list(self.recent_returns)),
             "env": ckpt.env_state(self.env),
         }
 
@@ -349,6 +368,11 @@ class PPOTrainer:
         self.needs_reset = payload["needs_reset"]
         ckpt.load_env_state(self.env, payload["env"])
         self.tracker.load_state_dict(payload["tracker"])
+        if "recent" in payload:
+            self.recent.clear()
+            self.recent_returns.clear()
+            self.recent.extend(payload["recent"][0])
+            self.recent_returns.extend(payload["recent"][1])
         if "rng" in payload:
             ckpt.set_rng_state(payload["rng"])
 
