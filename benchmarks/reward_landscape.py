@@ -34,7 +34,12 @@ class KeepSpeedDriver:
         return np.repeat(self.actions, self.num_agents, axis=0)
 
 
-DRIVERS = {"rule_based": RuleBasedDriver, "static": StaticDriver, "random": RandomDriver, "keep_speed": KeepSpeedDriver}
+DRIVERS = {
+    "rule_based": RuleBasedDriver,
+    "static": StaticDriver,
+    "random": RandomDriver,
+    "keep_speed": KeepSpeedDriver,
+}
 SHOWN = ("episodes", "waypoint_completion", "return_mean", "collision_rate", "offroad_rate", "km")
 
 
@@ -59,7 +64,9 @@ def run(overrides: list[str], worlds: int, steps: int, seed: int) -> dict[str, d
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of the train config")
     parser.add_argument("--worlds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=400, help="env steps (0.1 s each)")

@@ -4,16 +4,12 @@ vehicle and pedestrian collisions on the true oriented boxes. The road events an
 gather of the observation are in road.pyx.
 """
 
-from libc.math cimport sqrt, ceil, cos, sin
+from libc.math cimport sqrt, ceil, cos, sin, NAN
 from libc.stdint cimport int64_t
 from selfplaydrive._sim.common cimport Sim, Params, EV_COLLIDE, EV_PED
 from selfplaydrive._sim.geometry cimport obb_overlap, box_radius, wrap_angle
 from selfplaydrive._sim.rng cimport rng_int, rng_uniform
 
-# slack of the collision pre-test (relative on the squared reach, and absolute [m^2]): far
-# above float32 rounding, so a pair it skips is one swept_overlap would reject too
-DEF PRE_SLACK = 1.001
-DEF PRE_ABS = 1e-4
 
 
 cdef void lights_peds_world(Sim* sim, const Params* prm, int w) noexcept nogil:
@@ -124,87 +120,133 @@ cdef inline bint agents_hit(Sim* sim, int i, int j, int max_sub) noexcept nogil:
                          sim.hcos[j], sim.hsin[j], 0.5 * sim.length[j], 0.5 * sim.width[j], max_sub)
 
 
+cdef extern from "near.h" nogil:
+    int spd_near4(const float* bx, const float* by, const float* br, int k, float x0, float y0,
+                  float r0)
+
+
+cdef inline int pad4(int n) noexcept nogil:
+    return (n + 3) & ~3
+
+
 cdef void collisions_world(Sim* sim, const Params* prm, int w) noexcept nogil:
     """Set EV_COLLIDE / EV_PED on active agents of world `w` whose box meets another body.
 
     Bodies: active agents, ended agents kept as obstacles, static vehicles, pedestrians. A
     pair is tested exactly (`swept_overlap`) only when the final centres lie within the sum of
-    both swept radii (bounding radius + this step's motion), a bound that is never smaller
-    than swept_overlap's own early-out distance: the pre-test changes no result.
+    both swept radii (bounding radius + this step's motion) with a relative slack, a bound
+    that is never smaller than swept_overlap's own early-out distance: the pre-test changes
+    no result. The pre-test runs four bodies at a time (near.h) on a struct-of-arrays copy
+    of the world's bodies (`body_soa`), in the original pair order.
     """
-    cdef int a, b, i, j, k, n = sim.A, S = sim.S, P = sim.P
-    cdef float* rad = sim.cand_d + <int64_t>w * sim.cand_cap   # scratch: swept radius per body
-    cdef float dx, dy, sr
-    swept_radii(sim, w, rad)
+    cdef int a, b, i, j, k, l, m, n = sim.A, S = sim.S, P = sim.P, nA = pad4(sim.A)
+    cdef int nS = pad4(sim.S), nP = pad4(sim.P), k0
+    cdef float* ax = sim.cand_d + <int64_t>w * sim.cand_cap   # scratch, see body_soa
+    cdef float* ay = ax + nA
+    cdef float* ar = ay + nA
+    cdef float* sx = ar + nA
+    cdef float* sy = sx + nS
+    cdef float* sr = sy + nS
+    cdef float* qx = sr + nS
+    cdef float* qy = qx + nP
+    cdef float* qr = qy + nP
+    cdef float x0, y0, r0
+    body_soa(sim, w, ax, nA, sx, nS, qx, nP)
     for a in range(n):
         i = w * n + a
         if not (sim.active[i] or sim.obstacle[i]):
             continue
-        for b in range(a + 1, n):
-            j = w * n + b
-            if not (sim.active[j] or sim.obstacle[j]) or not (sim.active[i] or sim.active[j]):
+        x0 = ax[a]
+        y0 = ay[a]
+        r0 = ar[a]
+        k0 = (a + 1) & ~3
+        for k in range(k0, nA, 4):
+            m = spd_near4(ax, ay, ar, k, x0, y0, r0)
+            if k == k0:
+                m &= ~((1 << (a + 1 - k0)) - 1)  # pairs (a, b) with b > a only
+            if m == 0:
                 continue
-            dx = sim.x[j] - sim.x[i]
-            dy = sim.y[j] - sim.y[i]
-            sr = rad[a] + rad[b]
-            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
-                continue
-            if agents_hit(sim, i, j, prm.max_substeps):
-                if sim.active[i]:
-                    sim.events[i] |= EV_COLLIDE
-                if sim.active[j]:
-                    sim.events[j] |= EV_COLLIDE
+            for l in range(4):
+                if not (m >> l) & 1:
+                    continue
+                b = k + l
+                j = w * n + b
+                if not (sim.active[i] or sim.active[j]):
+                    continue
+                if agents_hit(sim, i, j, prm.max_substeps):
+                    if sim.active[i]:
+                        sim.events[i] |= EV_COLLIDE
+                    if sim.active[j]:
+                        sim.events[j] |= EV_COLLIDE
         if not sim.active[i]:
             continue
-        for k in range(S):
-            j = w * S + k
-            if not sim.st_valid[j]:
+        for k in range(0, nS, 4):
+            m = spd_near4(sx, sy, sr, k, x0, y0, r0)
+            if m == 0:
                 continue
-            dx = sim.st_x[j] - sim.x[i]
-            dy = sim.st_y[j] - sim.y[i]
-            sr = rad[a] + rad[n + k]
-            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
+            for l in range(4):
+                if not (m >> l) & 1:
+                    continue
+                j = w * S + k + l
+                if swept_overlap(
+                        sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
+                        sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
+                        sim.st_x[j], sim.st_y[j], 0.0, sim.st_x[j], sim.st_y[j], 0.0,
+                        sim.st_cos[j], sim.st_sin[j], 0.5 * sim.st_len[j], 0.5 * sim.st_wid[j],
+                        prm.max_substeps):
+                    sim.events[i] |= EV_COLLIDE
+        for k in range(0, nP, 4):
+            m = spd_near4(qx, qy, qr, k, x0, y0, r0)
+            if m == 0:
                 continue
-            if swept_overlap(
-                    sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
-                    sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
-                    sim.st_x[j], sim.st_y[j], 0.0, sim.st_x[j], sim.st_y[j], 0.0,
-                    sim.st_cos[j], sim.st_sin[j], 0.5 * sim.st_len[j], 0.5 * sim.st_wid[j],
-                    prm.max_substeps):
-                sim.events[i] |= EV_COLLIDE
-        for k in range(P):
-            j = w * P + k
-            if not (sim.ped_valid[j] and sim.ped_here[j]):
-                continue
-            dx = sim.ped_x[j] - sim.x[i]
-            dy = sim.ped_y[j] - sim.y[i]
-            sr = rad[a] + rad[n + S + k]
-            if dx * dx + dy * dy > sr * sr * PRE_SLACK + PRE_ABS:
-                continue
-            if swept_overlap(
-                    sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
-                    sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
-                    sim.ped_px[j], sim.ped_py[j], 0.0, sim.ped_x[j], sim.ped_y[j], 0.0,
-                    sim.ped_cos[j], sim.ped_sin[j], 0.5 * sim.ped_len[j], 0.5 * sim.ped_wid[j],
-                    prm.max_substeps):
-                sim.events[i] |= EV_PED
+            for l in range(4):
+                if not (m >> l) & 1:
+                    continue
+                j = w * P + k + l
+                if swept_overlap(
+                        sim.px[i], sim.py[i], sim.pheading[i], sim.x[i], sim.y[i], sim.heading[i],
+                        sim.hcos[i], sim.hsin[i], 0.5 * sim.length[i], 0.5 * sim.width[i],
+                        sim.ped_px[j], sim.ped_py[j], 0.0, sim.ped_x[j], sim.ped_y[j], 0.0,
+                        sim.ped_cos[j], sim.ped_sin[j], 0.5 * sim.ped_len[j], 0.5 * sim.ped_wid[j],
+                        prm.max_substeps):
+                    sim.events[i] |= EV_PED
 
 
-cdef void swept_radii(Sim* sim, int w, float* rad) noexcept nogil:
-    """rad[body] = bounding radius + distance moved this step [m], bodies ordered agents,
-    statics, pedestrians (the scratch holds at least A + S + P floats)."""
-    cdef int a, k, i, n = sim.A, S = sim.S, P = sim.P
+cdef void body_soa(Sim* sim, int w, float* ax, int nA, float* sx, int nS, float* qx,
+                   int nP) noexcept nogil:
+    """Struct-of-arrays copy of the bodies of world `w` for the pre-test: for agents (nA
+    slots, padded to a multiple of 4), statics (nS) and pedestrians (nP) three arrays each,
+    x, y [m] and swept radius (bounding radius + distance moved this step) [m], laid out as
+    x[0:n], y[n:2n], r[2n:3n]. Bodies that take no part (empty slots, ended agents not kept,
+    vanished pedestrians, padding) get x = NaN. The scratch holds 3 (nA + nS + nP) floats."""
+    cdef float nan = NAN
+    cdef int a, k, i, A = sim.A, S = sim.S, P = sim.P
     cdef float dx, dy
-    for a in range(n):
-        i = w * n + a
-        dx = sim.x[i] - sim.px[i]
-        dy = sim.y[i] - sim.py[i]
-        rad[a] = box_radius(0.5 * sim.length[i], 0.5 * sim.width[i]) + sqrt(dx * dx + dy * dy)
-    for k in range(S):
-        i = w * S + k
-        rad[n + k] = box_radius(0.5 * sim.st_len[i], 0.5 * sim.st_wid[i])
-    for k in range(P):
-        i = w * P + k
-        dx = sim.ped_x[i] - sim.ped_px[i]
-        dy = sim.ped_y[i] - sim.ped_py[i]
-        rad[n + S + k] = box_radius(0.5 * sim.ped_len[i], 0.5 * sim.ped_wid[i]) + sqrt(dx * dx + dy * dy)
+    for a in range(nA):
+        ax[a] = nan
+        if a < A:
+            i = w * A + a
+            if sim.active[i] or sim.obstacle[i]:
+                dx = sim.x[i] - sim.px[i]
+                dy = sim.y[i] - sim.py[i]
+                ax[a] = sim.x[i]
+                ax[nA + a] = sim.y[i]
+                ax[2 * nA + a] = box_radius(0.5 * sim.length[i], 0.5 * sim.width[i]) + sqrt(dx * dx + dy * dy)
+    for k in range(nS):
+        sx[k] = nan
+        if k < S:
+            i = w * S + k
+            if sim.st_valid[i]:
+                sx[k] = sim.st_x[i]
+                sx[nS + k] = sim.st_y[i]
+                sx[2 * nS + k] = box_radius(0.5 * sim.st_len[i], 0.5 * sim.st_wid[i])
+    for k in range(nP):
+        qx[k] = nan
+        if k < P:
+            i = w * P + k
+            if sim.ped_valid[i] and sim.ped_here[i]:
+                dx = sim.ped_x[i] - sim.ped_px[i]
+                dy = sim.ped_y[i] - sim.ped_py[i]
+                qx[k] = sim.ped_x[i]
+                qx[nP + k] = sim.ped_y[i]
+                qx[2 * nP + k] = box_radius(0.5 * sim.ped_len[i], 0.5 * sim.ped_wid[i]) + sqrt(dx * dx + dy * dy)

@@ -4,7 +4,9 @@ buffer-wide clearing). Layout and feature names: selfplaydrive/sim/layout.py. Ev
 scaled and clipped to [-1, 1]; positions and directions are in the ego frame (x forward,
 y left)."""
 
+from libc.stddef cimport ptrdiff_t
 from libc.stdint cimport int8_t, int32_t, int64_t
+from libc.math cimport NAN
 from libc.string cimport memset
 from selfplaydrive._sim.common cimport (Sim, Params, Atlas, EGO_DIM, OBJ_DIM, ROAD_DIM,
                                         NUM_COEFFS, SEG_LIGHT)
@@ -12,11 +14,32 @@ from selfplaydrive._sim.geometry cimport select_nearest
 
 
 cdef extern from "rows.h" nogil:
+    int spd_simd_init(int want)
     float spd_clip(float v)
-    void spd_road_row(float* r, const float* rec, float x, float y, float c, float s,
-                      float cp, float sp)
-    void spd_object_row(float* r, const float* rec, float x, float y, float c, float s,
-                        float cp, float sp, float cv, float sv)
+    ctypedef struct spd_road_cols:
+        const float* mx
+        const float* my
+        const float* cols
+        ptrdiff_t stride
+        const int32_t* group
+        const int32_t* id
+    void spd_road_rows(float* o, int32_t* idx, int n, const float* recs, const spd_road_cols* rc,
+                       float x, float y, float c, float s, float cp, float sp,
+                       const int8_t* gstate, int G)
+    void spd_object_rows(float* o, const int32_t* cand, int n, const float* table, float x,
+                         float y, float c, float s, float cp, float sp, float cv, float sv)
+
+cdef extern from "near.h" nogil:
+    int spd_within(const float* bx, const float* by, int nb, float x0, float y0, float r2,
+                   int skip, int32_t* out)
+
+def _set_simd(int level):
+    """Set this module's SIMD level (selfplaydrive._sim.simd_level); returns the level used."""
+    return spd_simd_init(level)
+
+
+from selfplaydrive._sim import requested_simd
+_set_simd(requested_simd())
 
 
 cdef inline float clip(float v) noexcept nogil:
@@ -26,7 +49,7 @@ cdef inline float clip(float v) noexcept nogil:
 
 cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
     """Write the observation row of every active agent of world `w`."""
-    cdef int a, i, nb
+    cdef int a, i, nb, own = 0
     cdef float* row
     cdef float* table = sim.cand_d + <int64_t>w * sim.cand_cap
     cdef int32_t* owner = sim.cand + <int64_t>w * sim.cand_cap
@@ -36,8 +59,10 @@ cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) 
         if sim.active[i]:
             row = &sim.obs[<int64_t>i * sim.obs_dim]
             write_ego(sim, prm, i, row)
-            write_objects(sim, prm, w, i, a, table, owner, nb, row + EGO_DIM)
+            write_objects(sim, prm, w, i, own, table, nb, row + EGO_DIM)
             write_road(sim, atlas, prm, w, i, row + EGO_DIM + sim.max_obj * OBJ_DIM)
+        # body_table packs agents that are active or kept as obstacles first, in slot order
+        own += sim.active[i] or sim.obstacle[i]
 
 
 cdef void write_ego(Sim* sim, const Params* prm, int i, float* o) noexcept nogil:
@@ -68,14 +93,22 @@ cdef inline void ego_xy(Sim* sim, int i, int k, float c, float s, float* dx, flo
     dy[0] = -s * ux + c * uy
 
 
+cdef inline int pad4(int n) noexcept nogil:
+    return (n + 3) & ~3
+
+
 cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner) noexcept nogil:
     """Pack the observable bodies of world `w` once per step: agents (active or obstacles),
     static vehicles, present pedestrians, in slot order, as 8-float records (x, y, cos, sin,
     vx, vy, length and width scaled and clipped; rows.h) in `t`; owner[k] is the agent slot
-    of record k (-1 for other bodies). Returns the number of records. The scratch holds
-    10 (A + S + P) floats and ints (sim/buffers.py `Dims.of`)."""
-    cdef int k, j, nb = 0, A = sim.A, S = sim.S, P = sim.P
+    of record k (-1 for other bodies). Then, after the records' slots (NB = A + S + P of
+    them), NB floats of distance scratch and the record positions x and y as two arrays of
+    pad4(NB) floats, padded with NaN (near.h `spd_within`). Returns the number of records.
+    The scratch holds 10 NB + 32 floats and ints (sim/buffers.py `Dims.of`)."""
+    cdef int k, j, nb = 0, A = sim.A, S = sim.S, P = sim.P, NB = sim.A + sim.S + sim.P
     cdef float* r
+    cdef float* bx = t + 9 * NB
+    cdef float* by = bx + pad4(NB)
     for k in range(A):
         j = w * A + k
         if sim.active[j] or sim.obstacle[j]:
@@ -103,34 +136,37 @@ cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner
             r[6] = clip(sim.ped_len[j] / prm.length_scale); r[7] = clip(sim.ped_wid[j] / prm.width_scale)
             owner[nb] = -1
             nb += 1
+    for k in range(pad4(nb)):
+        bx[k] = t[8 * k] if k < nb else NAN
+        by[k] = t[8 * k + 1] if k < nb else NAN
     return nb
 
 
-cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int a, const float* table,
-                        const int32_t* owner, int nb, float* o) noexcept nogil:
+cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int own, const float* table,
+                        int nb, float* o) noexcept nogil:
     """The `max_obj` nearest bodies within obs_radius (class not observed, section 2.5), from
-    the world's body table; ties in distance go to the lower table index (slot order)."""
+    the world's body table (`own`: agent i's record, not observed); ties in distance go to
+    the lower table index (slot order)."""
     cdef int NB = sim.A + sim.S + sim.P
     cdef float* cd = <float*>table + 8 * NB        # scratch after the table
-    cdef int32_t* cand = <int32_t*>owner + NB
-    cdef int n = 0, k
-    cdef float x = sim.x[i], y = sim.y[i], R2 = prm.obs_radius * prm.obs_radius, dx, dy, d2
+    cdef const float* bx = table + 9 * NB
+    cdef const float* by = bx + pad4(NB)
+    cdef int32_t* cand = sim.cand + <int64_t>w * sim.cand_cap + NB
+    cdef int n, k, t
+    cdef float x = sim.x[i], y = sim.y[i], R2 = prm.obs_radius * prm.obs_radius, dx, dy
     cdef float c = sim.hcos[i], s = sim.hsin[i]
     cdef float cp = c * prm.inv_pos_scale, sp = s * prm.inv_pos_scale
     cdef float cv = c * prm.inv_max_speed, sv = s * prm.inv_max_speed
-    for k in range(nb):
-        dx = table[8 * k] - x
-        dy = table[8 * k + 1] - y
-        d2 = dx * dx + dy * dy
-        if d2 <= R2 and owner[k] != a:
-            cand[n] = k
-            cd[n] = d2
-            n += 1
+    n = spd_within(bx, by, nb, x, y, R2, own, cand)
     if n > sim.max_obj:
+        for t in range(n):
+            k = cand[t]
+            dx = table[8 * k] - x
+            dy = table[8 * k + 1] - y
+            cd[t] = dx * dx + dy * dy
         select_nearest(cd, cand, n, sim.max_obj)
         n = sim.max_obj
-    for k in range(n):
-        spd_object_row(o + k * OBJ_DIM, table + 8 * cand[k], x, y, c, s, cp, sp, cv, sv)
+    spd_object_rows(o, cand, n, table, x, y, c, s, cp, sp, cv, sv)
     memset(o + n * OBJ_DIM, 0, (sim.max_obj - n) * OBJ_DIM * sizeof(float))
 
 
@@ -139,25 +175,17 @@ cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
     directions are precomputed), length, type and traffic-light state, from the packed atlas
     record of each segment. The gather leaves atlas positions in road_idx; they are replaced
     here by global segment indices."""
-    cdef int n = sim.road_n[i], k, g, G = sim.G
+    cdef int n = sim.road_n[i]
     cdef int32_t* idx = &sim.road_idx[<int64_t>i * sim.max_road]
-    cdef float x = sim.x[i], y = sim.y[i]
     # the position scale folded into the rotation: one multiply per coordinate
     cdef float c = sim.hcos[i], s = sim.hsin[i], cp = c * prm.inv_pos_scale, sp = s * prm.inv_pos_scale
-    cdef float third = <float>(1.0 / 3.0)
-    cdef const int8_t* gstate = &sim.light_state[w * G]
-    # locals, not struct fields: the module is built with -fno-strict-aliasing, so every
-    # store below would otherwise force the compiler to reload them
-    cdef const float* recs = atlas.seg_rec
-    cdef const float* rec
-    cdef float* r = o
-    for k in range(n):
-        rec = recs + 8 * idx[k]
-        spd_road_row(r, rec, x, y, c, s, cp, sp)
-        idx[k] = (<const int32_t*>rec)[7]
-        if rec[6] >= 0.0:
-            g = <int>rec[6]
-            if g < G:
-                r[7] = gstate[g] * third
-        r += ROAD_DIM
+    cdef spd_road_cols rc
+    rc.mx = atlas.seg_mx
+    rc.my = atlas.seg_my
+    rc.cols = atlas.seg_cols
+    rc.stride = atlas.num_segments + 8
+    rc.group = atlas.seg_group
+    rc.id = atlas.seg_id
+    spd_road_rows(o, idx, n, atlas.seg_rec, &rc, sim.x[i], sim.y[i], c, s, cp, sp,
+                  &sim.light_state[w * sim.G], sim.G)
     memset(o + n * ROAD_DIM, 0, (sim.max_road - n) * ROAD_DIM * sizeof(float))

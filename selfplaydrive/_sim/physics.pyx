@@ -19,6 +19,7 @@ from selfplaydrive._sim.geometry cimport wrap_angle
 cdef void physics_world(Sim* sim, const Params* prm, int w) noexcept nogil:
     """Advance every active agent of world `w` by one step `prm.dt` from its action."""
     cdef int a, i
+    cdef double dist = sim.dist[w]
     if prm.physics == PHYS_EXTERNAL:
         # a Python model already moved the vehicles and set px, py, pheading, a_long, a_lat
         for a in range(sim.A):
@@ -31,13 +32,17 @@ cdef void physics_world(Sim* sim, const Params* prm, int w) noexcept nogil:
         sim.pheading[i] = sim.heading[i]
         sim.events[i] = 0
         if sim.active[i]:
-            step_vehicle(sim, prm, i)
+            dist += step_vehicle(sim, prm, i)
         else:
             sim.a_long[i] = 0.0
             sim.a_lat[i] = 0.0
+    # the world's distance is accumulated locally, in agent order, and stored once: the same
+    # sum, and no store per agent to a line the world next door may be writing (threads)
+    sim.dist[w] = dist
 
 
-cdef inline void step_vehicle(Sim* sim, const Params* prm, int i) noexcept nogil:
+cdef inline double step_vehicle(Sim* sim, const Params* prm, int i) noexcept nogil:
+    """Advance agent i one step; returns the distance it drove [m] (v1 dt)."""
     cdef float acc, steer, v0, v1, vreq, lw, tb, norm, kappa, alat, scale, sb, cb, th, mu_g
     cdef float ch, sh, dt = prm.dt
     if prm.discrete:
@@ -86,7 +91,7 @@ cdef inline void step_vehicle(Sim* sim, const Params* prm, int i) noexcept nogil
     sim.speed[i] = v1
     sim.a_long[i] = (v1 - v0) / dt
     sim.a_lat[i] = v1 * v1 * kappa
-    sim.dist[i // sim.A] += v1 * dt
+    return v1 * dt
 
 
 cdef inline float clampf(float v, float lo, float hi) noexcept nogil:

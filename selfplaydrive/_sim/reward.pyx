@@ -15,9 +15,18 @@ from selfplaydrive._sim.common cimport (Sim, Params, EV_COLLIDE, EV_PED, EV_OFFR
 
 
 cdef void reward_world(Sim* sim, const Params* prm, int w) noexcept nogil:
-    """Per-term rewards, their sum, terminations and truncations of every slot of world `w`."""
+    """Per-term rewards, their sum, terminations and truncations of every slot of world `w`.
+    The world's per-term sums and event counts are accumulated in locals (in agent order, so
+    the same sums) and stored once: no store per agent to lines shared with the world next
+    door when threads step neighbouring worlds."""
     cdef int a, i, k
     cdef bint time_up = sim.step[w] >= sim.max_steps[w]
+    cdef double sums[NUM_TERMS]
+    cdef int64_t counts[NUM_STATS]
+    for k in range(NUM_TERMS):
+        sums[k] = sim.term_sum[w * NUM_TERMS + k]
+    for k in range(NUM_STATS):
+        counts[k] = sim.ev_count[w * NUM_STATS + k]
     for a in range(sim.A):
         i = w * sim.A + a
         if not sim.active[i]:
@@ -31,11 +40,15 @@ cdef void reward_world(Sim* sim, const Params* prm, int w) noexcept nogil:
         sim.reward[i] = 0.0
         for k in range(NUM_TERMS):
             sim.reward[i] += sim.terms[i * NUM_TERMS + k]
-            sim.term_sum[w * NUM_TERMS + k] += sim.terms[i * NUM_TERMS + k]
+            sums[k] += sim.terms[i * NUM_TERMS + k]
         sim.term[i] = terminates(sim, prm, i)
         # reaching the time limit is a truncation, reported apart from termination (section 2)
         sim.trunc[i] = time_up and not sim.term[i]
-        count_events(sim, w, i)
+        count_events(sim, counts, i)
+    for k in range(NUM_TERMS):
+        sim.term_sum[w * NUM_TERMS + k] = sums[k]
+    for k in range(NUM_STATS):
+        sim.ev_count[w * NUM_STATS + k] = counts[k]
 
 
 cdef void agent_terms(Sim* sim, const Params* prm, int i, float* t) noexcept nogil:
@@ -73,9 +86,8 @@ cdef inline bint terminates(Sim* sim, const Params* prm, int i) noexcept nogil:
     return False
 
 
-cdef inline void count_events(Sim* sim, int w, int i) noexcept nogil:
+cdef inline void count_events(Sim* sim, int64_t* c, int i) noexcept nogil:
     cdef unsigned char ev = sim.events[i]
-    cdef int64_t* c = &sim.ev_count[w * NUM_STATS]
     c[S_COLLIDE] += (ev & EV_COLLIDE) != 0
     c[S_PED] += (ev & EV_PED) != 0
     c[S_OFFROAD] += (ev & EV_OFFROAD) != 0

@@ -14,13 +14,32 @@ from selfplaydrive._sim.common cimport (Sim, Params, Atlas, SEG_LANE, SEG_EDGE, 
 from selfplaydrive._sim.geometry cimport seg_box, segs_cross, box_radius, select_nearest_binned
 
 cdef extern from "scan.h" nogil:
+    int spd_scan_init(int want)
     int32_t spd_fbits(float f)
-    void spd_scan_split(const float* mx, const float* my, int lo, int cnt, float x, float y,
-                        int32_t ilo, int32_t ihi, int32_t* inner, int* ni, int32_t* shell,
-                        float* shell_d, int* ns)
+    void spd_scan_split_c(const float* mx, const float* my, int lo, int cnt, float x, float y,
+                          int32_t ilo, int32_t ihi, int32_t* inner, int* ni, int32_t* shell,
+                          float* shell_d, int* ns)
+    void spd_scan_columns(const float* mx, const float* my, const int32_t* cols, int ncols,
+                          float x, float y, int32_t ilo, int32_t ihi, int32_t iev,
+                          int32_t* inner, int* ni, int32_t* shell, float* shell_d, int* ns,
+                          int32_t* ev, int* ne)
+
+# grid columns collected before one call of the scan (scan.h spd_scan_columns)
+DEF COLS = 48
+
+
+def _set_simd(int level):
+    """Set this module's SIMD level (selfplaydrive._sim.simd_level); returns the level used."""
+    return spd_scan_init(level)
+
+
+from selfplaydrive._sim import requested_simd
+_set_simd(requested_simd())
 
 # [m] slack on the distance bounds of the road gather: covers float32 rounding of distances
 DEF RPAD = 0.01
+# [m] slack on the per-segment reach of the road-event pre-tests (float32 rounding)
+DEF EPAD = 0.01
 
 
 cdef void road_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
@@ -55,18 +74,20 @@ cdef void road_agent(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
     cdef int m = sim.map_id[w], n, cap = sim.cand_cap, maxr = sim.max_road, keep
     cdef float x = sim.x[i], y = sim.y[i], R = prm.obs_radius
     cdef float hl = 0.5 * sim.length[i], hw = 0.5 * sim.width[i], half_seg = 0.5 * atlas.max_seg_len[m]
-    cdef float dpx = x - sim.px[i], dpy = y - sim.py[i], moved, near, lane_far, prev, lo, hi, dmax2
+    cdef float dpx = x - sim.px[i], dpy = y - sim.py[i], moved, near, lane_far, ev, prev, lo, hi
+    cdef float dmax2 = 0.0, box_r, step
     cdef int32_t* cand = sim.cand + <int64_t>w * cap
     cdef float* cd = sim.cand_d + <int64_t>w * cap
-    moved = sqrt(dpx * dpx + dpy * dpy)
+    step = sqrt(dpx * dpx + dpy * dpy)
     # a segment can touch the box only when its midpoint is within box radius + half the
     # longest segment + this step's motion (swept red-light crossing)
-    near = box_radius(hl, hw) + half_seg + moved
+    box_r = box_radius(hl, hw)
+    near = box_r + half_seg + step
     lane_far = prm.lane_radius + half_seg
-    n = scan_disc(atlas, m, x, y, max(near, lane_far), cand, cd, cap)
-    road_events(sim, atlas, prm, w, i, cand, cd, n, near * near, lane_far * lane_far)
+    ev = max(near, lane_far)
     prev = sim.road_r[i]
     keep = -1
+    lo = hi = 0.0
     if prev >= 0.0:
         # d_k (distance of the k-th nearest midpoint) is 1-Lipschitz in the position: after
         # moving by `moved` it lies in [prev - moved, prev + moved]; everything nearer than the
@@ -76,13 +97,110 @@ cdef void road_agent(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
         moved = sqrt(dpx * dpx + dpy * dpy)
         hi = min(prev + moved + RPAD, R)
         lo = prev - moved - RPAD
-        keep = nearest_in_bounds(sim, atlas, w, i, lo, hi, cand, cd, &dmax2)
+        keep = gather_bounded(sim, atlas, prm, w, i, lo, hi, ev, near * near, lane_far * lane_far,
+                              box_r, step, &dmax2)
     if keep < 0:
-        keep = nearest_by_rings(sim, atlas, prm, w, i, cand, cd, &dmax2)
+        # first gather of an episode, or a scratch overflow: events disc, then the bounded
+        # split (when a bound exists) or the ring search
+        n = scan_disc(atlas, m, x, y, ev, cand, cd, cap)
+        road_events(sim, atlas, prm, w, i, cand, n, near * near, lane_far * lane_far, box_r, step)
+        if prev >= 0.0:
+            keep = nearest_in_bounds(sim, atlas, w, i, lo, hi, cand, cd, &dmax2)
+        if keep < 0:
+            keep = nearest_by_rings(sim, atlas, prm, w, i, cand, cd, &dmax2)
     sim.road_n[i] = keep
     sim.road_r[i] = sqrt(dmax2) if keep >= maxr else R
     sim.road_x[i] = x
     sim.road_y[i] = y
+
+
+cdef inline int ifloor(float v) noexcept nogil:
+    """floor(v) as an int for |v| < 2^31 (no libm call)."""
+    cdef int k = <int>v
+    return k - (v < k)
+
+
+cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i, float lo,
+                        float hi, float ev, float near2, float lane_far2, float box_r, float step,
+                        float* dmax2) noexcept nogil:
+    """Road events and the nearest `max_road` in one pass over the grid columns meeting the
+    disc of radius max(hi, ev): every candidate's squared distance is split into inner
+    (< lo: kept), shell (selected) and, in the cells meeting the events disc of radius `ev`,
+    the events list. Same results as scan_disc + road_events + nearest_in_bounds. Returns the
+    count kept, or -1 (nothing written) when a scratch part would overflow or the inner part
+    does not fit (never with a valid bound); the caller then takes the separate passes."""
+    cdef int m = sim.map_id[w], nx = atlas.grid_nx[m], ny = atlas.grid_ny[m], ix, y0, y1
+    cdef int ni = 0, ns = 0, ne = 0, cap = sim.cand_cap, q = sim.cand_cap // 4
+    cdef int maxr = sim.max_road, a, b, keep, t, nc = 0, total = 0
+    cdef int32_t cols[3 * COLS]
+    cdef int32_t* col
+    cdef const int32_t* offs = atlas.cell_offsets + atlas.cell_base[m]
+    cdef float x = sim.x[i], y = sim.y[i], cell = atlas.grid_cell[m], inv, gx, gy, gs, ge, dx, h
+    cdef float S = max(hi, ev)
+    cdef int32_t ilo = spd_fbits(lo * lo) if lo > 0.0 else -1, ihi = spd_fbits(hi * hi)
+    cdef int32_t iev = spd_fbits(ev * ev)
+    cdef int32_t* cand = sim.cand + <int64_t>w * cap
+    cdef float* cd = sim.cand_d + <int64_t>w * cap
+    cdef int32_t* inner = cand            # [0, q): kept for sure
+    cdef int32_t* evl = cand + q          # [q, 2q): within the events radius
+    cdef int32_t* shell = cand + 2 * q    # [2q, cap): to be selected, with distances
+    cdef float* shell_d = cd + 2 * q
+    cdef int scap = cap - 2 * q
+    cdef int32_t* out = &sim.road_idx[<int64_t>i * maxr]
+    cdef float big = 0.0
+    if ilo > ihi:
+        ilo = ihi
+    inv = 1.0 / cell
+    gx = clamp_cells((x - atlas.grid_origin[2 * m]) * inv)
+    gy = clamp_cells((y - atlas.grid_origin[2 * m + 1]) * inv)
+    gs = S * inv
+    ge = ev * inv
+    for ix in range(max(ifloor(gx - gs), 0), min(ifloor(gx + gs), nx - 1) + 1):
+        dx = max(max(ix - gx, gx - (ix + 1)), 0.0)
+        h = gs * gs - dx * dx
+        if h < 0.0:
+            continue
+        h = sqrt(h)
+        y0 = max(ifloor(gy - h), 0)
+        y1 = min(ifloor(gy + h), ny - 1)
+        if y0 > y1:
+            continue
+        a = offs[ix * ny + y0]
+        b = offs[ix * ny + y1 + 1]
+        total += b - a
+        if total + 7 > q or total > scap:
+            return -1  # the scratch parts could overflow
+        col = &cols[3 * nc]
+        col[0] = a
+        col[1] = b
+        # the column meets the events disc: list its candidates within ev too (a candidate
+        # within ev lies in a cell that meets the disc, so these are scan_disc's candidates)
+        col[2] = ge * ge - dx * dx >= 0.0
+        nc += 1
+        if nc == COLS:
+            spd_scan_columns(atlas.seg_mx, atlas.seg_my, cols, nc, x, y, ilo, ihi, iev, inner,
+                             &ni, shell, shell_d, &ns, evl, &ne)
+            nc = 0
+    spd_scan_columns(atlas.seg_mx, atlas.seg_my, cols, nc, x, y, ilo, ihi, iev, inner, &ni,
+                     shell, shell_d, &ns, evl, &ne)
+    if ni >= maxr:
+        return -1
+    road_events(sim, atlas, prm, w, i, evl, ne, near2, lane_far2, box_r, step)
+    memcpy(out, inner, ni * sizeof(int32_t))
+    keep = min(ni + ns, maxr)
+    b = keep - ni
+    if b < ns:
+        for t in range(ns):
+            shell[t] = atlas.seg_id[shell[t]]  # ties by global index
+        select_nearest_binned(shell_d, shell, ns, b, max(lo * lo, 0.0), hi * hi)
+        for t in range(b):
+            shell[t] = atlas.seg_pos[shell[t]]
+    for t in range(b):
+        out[ni + t] = shell[t]
+        big = shell_d[t] if shell_d[t] > big else big
+    # with max_road kept at least one comes from the shell, whose entries are the farthest
+    dmax2[0] = big
+    return keep
 
 
 cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo, float hi,
@@ -116,8 +234,9 @@ cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo,
             continue
         a = offs[ix * ny + lo_y]
         cnt = min(offs[ix * ny + hi_y + 1] - a, min(half - ni, half - ns))  # cand_cap semantics
-        spd_scan_split(atlas.seg_mx, atlas.seg_my, a, cnt, x, y, ilo, ihi, cand, &ni,
-                       cand + half, cd + half, &ns)
+        # plain C: writes no lane past the capacity computed above
+        spd_scan_split_c(atlas.seg_mx, atlas.seg_my, a, cnt, x, y, ilo, ihi, cand, &ni,
+                         cand + half, cd + half, &ns)
     if ni >= maxr:
         return -1
     memcpy(out, cand, ni * sizeof(int32_t))
@@ -254,23 +373,34 @@ cdef inline int count_within(const float* cd, int n, float r2) noexcept nogil:
 
 
 cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i,
-                      const int32_t* cand, const float* cd, int n, float near2,
-                      float lane_far2) noexcept nogil:
-    """Road-edge contact, red-light crossing and lane association from the first n candidates
-    (the rings that cover every segment within reach of the box and of lane_radius)."""
+                      const int32_t* cand, int n, float near2, float lane_far2, float box_r,
+                      float moved) noexcept nogil:
+    """Road-edge contact, red-light crossing and lane association from the n candidates (atlas
+    positions covering every segment within reach of the box and of lane_radius; box_r: the
+    box's bounding radius, moved: this step's displacement [m]). Before an exact test, a
+    candidate is dropped when its midpoint is farther than the test's reach plus half its
+    own length (plus EPAD): then no point of it can pass the test, so no result changes."""
     cdef int t, p, g, ty, best_c = -1, best_a = -1
-    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld
+    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld, ex, ey
     cdef float hl = 0.5 * sim.length[i], hw = 0.5 * sim.width[i], R2 = prm.obs_radius * prm.obs_radius
-    cdef float dc = 1e30, da = 1e30, lr2 = prm.lane_radius * prm.lane_radius
+    cdef float dc = 1e30, da = 1e30, lr2 = prm.lane_radius * prm.lane_radius, rr
+    cdef float lane_reach = prm.lane_radius + EPAD, box_reach = box_r + EPAD
+    cdef float swept_reach = box_r + moved + EPAD
     cdef unsigned char bits = 0
     for t in range(n):
-        d2 = cd[t]
+        p = cand[t]
+        # the scan's squared midpoint distance, recomputed with the same float operations
+        ex = atlas.seg_mx[p] - x
+        ey = atlas.seg_my[p] - y
+        d2 = ex * ex + ey * ey
         if d2 > R2 or (d2 > near2 and d2 > lane_far2):
             continue
-        p = cand[t]
         ty = atlas.seg_type[p]
         if ty == SEG_LANE:
             if d2 <= lane_far2:
+                rr = lane_reach + 0.5 * atlas.seg_len[p]
+                if d2 > rr * rr:
+                    continue
                 ld = point_seg_d2(atlas, p, x, y)
                 if ld <= lr2:
                     # ties go to the lower global segment index (the reference's argmin)
@@ -282,9 +412,17 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
                         da = ld
                         best_a = p
         elif d2 <= near2 and ty == SEG_EDGE:
-            if box_touches(atlas, p, x, y, c, sn, hl, hw):
+            if bits & EV_OFFROAD:
+                continue  # already set: more contacts change nothing
+            rr = box_reach + 0.5 * atlas.seg_len[p]
+            if d2 <= rr * rr and box_touches(atlas, p, x, y, c, sn, hl, hw):
                 bits |= EV_OFFROAD
         elif d2 <= near2 and ty == SEG_LIGHT:
+            if bits & EV_RED:
+                continue
+            rr = swept_reach + 0.5 * atlas.seg_len[p]
+            if d2 > rr * rr:
+                continue
             g = atlas.seg_group[p]
             if g >= 0 and g < sim.G and sim.light_state[w * sim.G + g] == LIGHT_RED:
                 if box_touches(atlas, p, x, y, c, sn, hl, hw) or segs_cross(

@@ -147,12 +147,16 @@ cdef class World:
         cdef list k = self.keep
         f4, i1, i4, i8 = np.float32, np.int8, np.int32, np.int64
         self.atlas.num_maps = len(a["grid_cell"])
+        self.atlas.num_segments = len(a["seg_len"])
+        if a["seg_cols"].shape != (4, len(a["seg_len"]) + 8):
+            raise ValueError(f"atlas seg_cols: expected shape (4, Ns + 8), got {a['seg_cols'].shape}")
         self.atlas.seg_start = <float*>ptr(a, "seg_start", f4, k); self.atlas.seg_end = <float*>ptr(a, "seg_end", f4, k)
         self.atlas.seg_mid = <float*>ptr(a, "seg_mid", f4, k); self.atlas.seg_dir = <float*>ptr(a, "seg_dir", f4, k)
         self.atlas.seg_len = <float*>ptr(a, "seg_len", f4, k); self.atlas.seg_type = <int8_t*>ptr(a, "seg_type", i1, k)
         self.atlas.seg_group = <int32_t*>ptr(a, "seg_group", i4, k)
         self.atlas.seg_mx = <float*>ptr(a, "seg_mx", f4, k); self.atlas.seg_my = <float*>ptr(a, "seg_my", f4, k)
         self.atlas.seg_rec = <float*>ptr(a, "seg_rec", f4, k)
+        self.atlas.seg_cols = <float*>ptr(a, "seg_cols", f4, k)
         self.atlas.seg_id = <int32_t*>ptr(a, "seg_id", i4, k); self.atlas.seg_pos = <int32_t*>ptr(a, "seg_pos", i4, k)
         self.atlas.grid_origin = <float*>ptr(a, "grid_origin", f4, k); self.atlas.grid_cell = <float*>ptr(a, "grid_cell", f4, k)
         self.atlas.grid_nx = <int32_t*>ptr(a, "grid_nx", i4, k); self.atlas.grid_ny = <int32_t*>ptr(a, "grid_ny", i4, k)
@@ -186,14 +190,16 @@ cdef class World:
     def step(self, int num_threads=1, bint profile=False):
         """Advance every world one step; with `profile`, stage by stage with timings."""
         cdef int w, W = self.sim.W
+        cdef int chunk = 4 if W >= 8 * num_threads else 1
         if profile:
             self._step_profiled(num_threads)
             return
         with nogil:
-            # one parallel region per step; worlds handed out one at a time, so a thread that
-            # the OS deschedules (shared machine) does not hold the others back. Results do
-            # not depend on which thread steps a world.
-            for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=1):
+            # one parallel region per step; worlds handed out a few at a time, so a thread that
+            # the OS deschedules (shared machine) does not hold the others back, while
+            # neighbouring worlds (whose per-slot bytes share cache lines) mostly stay on one
+            # thread. Results do not depend on which thread steps a world.
+            for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=chunk):
                 step_one(&self.sim, &self.atlas, &self.prm, w)
 
     def _step_profiled(self, int num_threads):

@@ -22,8 +22,8 @@ from selfplaydrive.models.common import (
     check_nvec,
     check_positive,
     compact_sets,
-    middle_prior_bias,
     masked_max,
+    middle_prior_bias,
     reset_state,
 )
 from selfplaydrive.sim.layout import ObsLayout

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from selfplaydrive._sim.spawn import bimodal_uniform
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS
 
@@ -136,13 +137,19 @@ class ConditioningSampler:
         """
         if self.mode == "eval":
             return np.tile(self.eval_vector(), (n, 1))
-        # one (n, 10) draw: one column per coefficient plus the two mode choices, in this order
+        # one (n, 10) draw: one column per coefficient plus the two mode choices, in this order;
+        # coefficient k of an agent is lo_k + (hi_k - lo_k) u_k with its (bimodal) range
         u = rng.random((n, len(COEFF_NAMES) + 2))
-        lo, span = self._lo_span(u[:, -2] < self.center_low_prob, u[:, -1] < self.align_low_prob)
-        return (lo + span * u[:, : len(COEFF_NAMES)]).astype(np.float32)
+        lo, hi = self._lo_hi()
+        return bimodal_uniform(
+            u, lo, hi,
+            COEFF_NAMES.index("center"), self.center_low[0], self.center_low[1], self.center_low_prob,
+            COEFF_NAMES.index("align"), self.align_low[0], self.align_low[1], self.align_low_prob,
+        )  # fmt: skip
 
-    def _lo_span(self, center_low: np.ndarray, align_low: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, C) lower bounds and widths of each agent's uniform ranges (bimodal per agent)."""
+    def _lo_hi(self) -> tuple[np.ndarray, np.ndarray]:
+        """(C,) lower and upper bounds of each coefficient's range (the high mode of the two
+        bimodal ones)."""
         ranges = {
             "waypoint_radius": self.waypoint_radius,
             "collision": self.collision,
@@ -153,14 +160,9 @@ class ConditioningSampler:
             "center_bias": self.center_bias,
             "align": self.align_high,
         }
-        lo = np.array([ranges[k][0] for k in COEFF_NAMES])
-        hi = np.array([ranges[k][1] for k in COEFF_NAMES])
-        lo = np.broadcast_to(lo, (len(center_low), len(lo))).copy()
-        hi = np.broadcast_to(hi, lo.shape).copy()
-        c, a = COEFF_NAMES.index("center"), COEFF_NAMES.index("align")
-        lo[center_low, c], hi[center_low, c] = self.center_low
-        lo[align_low, a], hi[align_low, a] = self.align_low
-        return lo, hi - lo
+        lo = np.array([float(ranges[k][0]) for k in COEFF_NAMES])
+        hi = np.array([float(ranges[k][1]) for k in COEFF_NAMES])
+        return lo, hi
 
 
 class HiddenParamSampler:

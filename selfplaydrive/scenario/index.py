@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -106,6 +107,13 @@ class Crossings:
     end: np.ndarray
     half_width: np.ndarray
     cells: CellIndex
+
+    @cached_property
+    def kernel(self) -> object:
+        """The arrays bound once to the pedestrian kernels (`_sim.spawn.CrossingKernel`)."""
+        from selfplaydrive._sim.spawn import CrossingKernel
+
+        return CrossingKernel(self)
 
 
 def _cut_lanes(t: RouteTables, lanes: np.ndarray, chunk: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -248,6 +256,34 @@ class MapIndex:
         return cls(
             road_map, t, spawn, roadside, crossings, crosswalks, centres, length, region_size, region_stride
         )
+
+    @cached_property
+    def kernels(self) -> SpawnKernels:
+        """The index's arrays bound once to the Cython kernels of a world reset."""
+        from selfplaydrive._sim.spawn import ChunkKernel, RouteKernel
+
+        routes = RouteKernel(self.routes)
+        return SpawnKernels(routes, ChunkKernel(self.spawn, routes), ChunkKernel(self.roadside, routes))
+
+
+@dataclass(frozen=True)
+class SpawnKernels:
+    """`MapIndex.kernels`: route walks and waypoints (`routes`), pose draws on the spawn and
+    roadside chunks (`_sim/spawn.pyx` `RouteKernel`, `ChunkKernel`)."""
+
+    routes: object
+    spawn: object
+    roadside: object
+
+    def chunks(self, index: MapIndex, chunks: Chunks) -> object:
+        """The kernel of `chunks` (index.spawn or index.roadside)."""
+        if chunks is index.spawn:
+            return self.spawn
+        if chunks is index.roadside:
+            return self.roadside
+        from selfplaydrive._sim.spawn import ChunkKernel
+
+        return ChunkKernel(chunks, self.routes)
 
 
 def _chunks(

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from selfplaydrive._sim.spawn import pedestrian_paths, pedestrian_sites
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.index import Crossings
 
@@ -110,25 +111,26 @@ class PedestrianSampler:
         want = min(int(rng.integers(self.count[0], self.count[1] + 1)), slots)
         if want == 0:
             return out
-        cw, other = crosswalks.cells.query_box(box), crossings.cells.query_box(box)
-        n_cw, n_other = len(cw), len(other)
+        n_cw, n_other, cw, other = pedestrian_sites(
+            crosswalks.kernel, crossings.kernel, np.ascontiguousarray(box, dtype=np.float64)
+        )
         if n_cw + n_other == 0:
             return out
         # one draw per pedestrian: pool, site, sideways shift, direction, kerb side, approach,
         # speed, start time, size
         u = rng.random((want, 9))
         share = self.crosswalk_share if n_other else 1.0
-        use_cw = (u[:, 0] < share) if n_cw else np.zeros(want, dtype=bool)
-        site = np.where(use_cw, u[:, 1] * n_cw, n_cw + u[:, 1] * n_other).astype(np.int64)
-        pick = np.minimum(site, np.where(use_cw, n_cw, n_cw + n_other) - 1)  # u * n may round up to n
-        start = np.concatenate([crosswalks.start[cw], crossings.start[other]])[pick]
-        end = np.concatenate([crosswalks.end[cw], crossings.end[other]])[pick]
-        half = np.concatenate([crosswalks.half_width[cw], crossings.half_width[other]])[pick]
-        path = self._paths(start, end, half, u[:, 2:6])
-        clear_r = vehicle_radius + self.vehicle_clearance
-        ok = _clear_of(path[:, 0], vehicle_xy, clear_r)
-        if stationary is not None and np.any(stationary):
-            ok &= _path_clear_of(path, vehicle_xy[stationary], clear_r[stationary])
+        # site choice, paths (`_paths`) and the clearance tests (`_clear_of`,
+        # `_path_clear_of`) in one kernel call
+        path = np.empty((want, PATH_POINTS, 2))
+        ok = np.empty(want, dtype=bool)
+        still = np.zeros(len(vehicle_xy), dtype=bool) if stationary is None else stationary
+        pedestrian_paths(
+            crosswalks.kernel, crossings.kernel, cw, other, u, share, self.sidewalk_margin,
+            self.max_approach, np.ascontiguousarray(vehicle_xy, dtype=np.float64).reshape(-1, 2),
+            np.ascontiguousarray(vehicle_radius + self.vehicle_clearance, dtype=np.float64),
+            np.ascontiguousarray(still, dtype=bool), path, ok,
+        )  # fmt: skip
         n = int(ok.sum())
         u = u[ok]
         out.valid[:n] = True
@@ -138,44 +140,6 @@ class PedestrianSampler:
         out.start_time[:n] = self.start_time[0] + (self.start_time[1] - self.start_time[0]) * u[:, 7]
         out.size[:n] = (self.size[0] + (self.size[1] - self.size[0]) * u[:, 8])[:, None]
         return out
-
-    def _paths(self, start: np.ndarray, end: np.ndarray, half: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """(n, 3, 2) approach point, extended crossing start, extended crossing end.
-
-        u: (n, 4) uniforms for the sideways shift inside a crosswalk, the walking direction, the
-        kerb side of the approach and its length.
-        """
-        d = end - start
-        d = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
-        side = np.stack([-d[:, 1], d[:, 0]], axis=1)
-        shift = (half * (2.0 * u[:, 0] - 1.0))[:, None] * side
-        flip = (u[:, 1] < 0.5)[:, None]
-        a = np.where(flip, end, start) + shift
-        b = np.where(flip, start, end) + shift
-        d = np.where(flip, -d, d)
-        a = a - d * self.sidewalk_margin
-        b = b + d * self.sidewalk_margin
-        sign = np.where(u[:, 2] < 0.5, -1.0, 1.0)
-        approach = a + side * (sign * self.max_approach * u[:, 3])[:, None]
-        return np.stack([approach, a, b], axis=1)
-
-
-def _clear_of(points: np.ndarray, xy: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    if len(xy) == 0 or len(points) == 0:
-        return np.ones(len(points), dtype=bool)
-    d = np.hypot(points[:, None, 0] - xy[None, :, 0], points[:, None, 1] - xy[None, :, 1])
-    return np.all(d >= radius[None, :], axis=1)
-
-
-def _path_clear_of(path: np.ndarray, xy: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """(n,) bool: no segment of each (n, T, 2) path passes within `radius` (V,) of `xy` (V, 2)."""
-    a = path[:, :-1, None, :]  # (n, T-1, 1, 2)
-    d = path[:, 1:, None, :] - a
-    w = xy[None, None, :, :] - a  # (n, T-1, V, 2)
-    t = np.clip(np.sum(w * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-12), 0.0, 1.0)
-    gap = w - t[..., None] * d
-    dist2 = np.sum(gap * gap, axis=-1)
-    return np.all(dist2 >= (radius**2)[None, None, :], axis=(1, 2))
 
 
 def _empty(slots: int) -> PedestrianBatch:

@@ -76,44 +76,14 @@ def sample_on_chunks(
     """Up to `n` poses uniform over the length of the chunks whose midpoint lies in `box`; poses
     outside `box` are dropped (chunks at the border stick out by up to half a chunk).
 
-    Runs the fused Cython kernel `_sim.spawn.sample_chunk_poses`; the NumPy twin is
+    Runs the fused Cython kernel `_sim.spawn.ChunkKernel.poses` (`sample_chunk_poses` on
+    tables bound once per map); the NumPy twin is
     `testing.spawn_reference.sample_on_chunks_reference`. Draws (n, 2) uniforms from `rng`.
     """
-    from selfplaydrive._sim.spawn import sample_chunk_poses
-
     u = rng.random((max(n, 0), 2))
-    out_chunk = np.empty(len(u), dtype=np.int64)
-    out_s = np.empty(len(u))
-    out_xy = np.empty((len(u), 2))
-    out_h = np.empty(len(u))
-    cells, t = chunks.cells, index.routes
-    m = sample_chunk_poses(
-        cells.origin,
-        cells.cell,
-        cells.shape[0],
-        cells.shape[1],
-        cells.offsets,
-        cells.items,
-        cells.xy,
-        chunks.lane,
-        chunks.s0,
-        chunks.s1,
-        np.ascontiguousarray(box, dtype=np.float64),
-        u,
-        t.gcum,
-        t.px,
-        t.py,
-        t.heading,
-        t.base,
-        t.length,
-        t.offsets,
-        out_chunk,
-        out_s,
-        out_xy,
-        out_h,
-    )
-    chunk = out_chunk[:m]
-    return Poses(chunks.lane[chunk], out_s[:m], out_xy[:m], out_h[:m], chunk)
+    box = np.ascontiguousarray(box, dtype=np.float64)
+    lane, s, xy, heading, chunk = index.kernels.chunks(index, chunks).poses(box, u)
+    return Poses(lane, s, xy, heading, chunk)
 
 
 def greedy_separated(

@@ -32,24 +32,23 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from selfplaydrive._sim.spawn import aligned_candidates, roadside_poses
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
-from selfplaydrive.maps.routing import batch_waypoints, sample_routes, waypoint_times
+from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH, waypoint_times
 from selfplaydrive.scenario.conditioning import ConditioningSampler, HiddenParamSampler
 from selfplaydrive.scenario.index import MapIndex, map_index
 from selfplaydrive.scenario.lights import LightSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS, PedestrianSampler
-from selfplaydrive.scenario.placement import (
-    Poses,
-    offset_right,
-    roadside_offset,
-    sample_on_chunks,
-    sample_region,
-    wrap_angle,
-)
+from selfplaydrive.scenario.placement import Poses, sample_on_chunks, sample_region
 from selfplaydrive.scenario.placement import greedy_separated as _greedy
 from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
+
+# pieces per route at most (the default of `maps.routing.sample_routes`)
+MAX_ROUTE_PIECES = 128
+# columns of the spawner's (n, 10) agent rows
+AGENT_COLUMNS = ("lane", "s", "x", "y", "heading", "speed", "length", "width", "parked", "on_lane")
 
 
 def _half_diag(length: np.ndarray, width: np.ndarray) -> np.ndarray:
@@ -221,15 +220,15 @@ class PaperSpawner:
         box = sample_region(index, rng)
         sc = _empty_scenario(self, map_index, box, road_map.num_signal_groups)
         agents = self._agents(index, box, rng)
-        n = len(agents["lane"])
+        n = len(agents)
         self._write_agents(sc, agents)
-        self._waypoints(sc, index, agents["lane"], agents["s"], rng)
-        veh_xy, veh_r = agents["xy"], _half_diag(agents["length"], agents["width"])
+        self._waypoints(sc, index, agents[:, 0].astype(np.int64), agents[:, 1], rng)
+        veh_xy, veh_r = agents[:, 2:4], _half_diag(agents[:, 6], agents[:, 7])
         self._statics(sc, index, box, rng, veh_xy, veh_r)
         m = int(sc.static_valid.sum())
         all_xy = np.concatenate([veh_xy, sc.static_xy[:m].astype(np.float64)])
         all_r = np.concatenate([veh_r, _half_diag(sc.static_length[:m], sc.static_width[:m])])
-        still = np.concatenate([agents["parked"], np.ones(m, dtype=bool)])
+        still = np.concatenate([agents[:, 8] != 0, np.ones(m, dtype=bool)])
         peds = self.pedestrians.sample(
             rng, index.crossings, index.crosswalks, box, self.num_pedestrians, all_xy, all_r, still
         )
@@ -244,15 +243,18 @@ class PaperSpawner:
         return sc
 
     # -- agents ---------------------------------------------------------------------------------
+    # Agents and candidates are rows of one (n, 10) float64 array, columns `AGENT_COLUMNS`
+    # (lane index, arc length, centre x and y, heading, speed, length, width, parked, on lane),
+    # so a selection is one indexing operation.
 
-    def _agents(self, index: MapIndex, box: np.ndarray, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """Place parked then aligned agents, 15 m apart; returns per-agent arrays in slot order."""
+    def _agents(self, index: MapIndex, box: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Place parked then aligned agents, 15 m apart; returns (n, 10) rows in slot order."""
         want = self.num_agents
         n_parked = int(rng.binomial(want, self.parked_share))
         parked = self._parked(index, box, rng, n_parked)
-        aligned = self._spaced_aligned(index, box, rng, parked["xy"], want - len(parked["lane"]))
-        out = {k: np.concatenate([parked[k], aligned[k]]) for k in parked}
-        got = len(out["lane"])
+        aligned = self._spaced_aligned(index, box, rng, parked[:, 2:4], want - len(parked))
+        out = np.concatenate([parked, aligned])
+        got = len(out)
         if got == 0:
             raise ConfigError(
                 f"PaperSpawner could not place a single agent on map {index.road_map.name!r} in region "
@@ -267,11 +269,11 @@ class PaperSpawner:
                 stacklevel=3,
             )
         order = rng.permutation(got)  # mix parked and aligned agents over the slots
-        return {k: v[order] for k, v in out.items()}
+        return out[order]
 
     def _spaced_aligned(
         self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, fixed_xy: np.ndarray, need: int
-    ) -> dict[str, np.ndarray]:
+    ) -> np.ndarray:
         """Aligned agents `min_agent_distance` apart from each other and from `fixed_xy` (final
         positions, lateral shift included), drawn in two rounds: first `first_round_candidates`
         per agent, then the rest of the `candidates_per_agent` budget only if that fell short."""
@@ -279,84 +281,96 @@ class PaperSpawner:
         first = min(self.first_round_candidates, self.candidates_per_agent)
         cand = self._aligned(index, sample_on_chunks(index, index.spawn, box, rng, need * first), rng)
         fixed_r = np.full(len(fixed_xy), radius)
-        picked = _greedy(cand["xy"], np.full(len(cand["xy"]), radius), need, fixed_xy, fixed_r)
+        picked = _greedy(cand[:, 2:4], np.full(len(cand), radius), need, fixed_xy, fixed_r)
         if len(picked) < need and self.candidates_per_agent > first:
             more = sample_on_chunks(index, index.spawn, box, rng, need * (self.candidates_per_agent - first))
-            more_cand = self._aligned(index, more, rng)
-            cand = {k: np.concatenate([cand[k], more_cand[k]]) for k in cand}
-            picked = _greedy(cand["xy"], np.full(len(cand["xy"]), radius), need, fixed_xy, fixed_r)
-        return {k: v[picked] for k, v in cand.items()}
+            cand = np.concatenate([cand, self._aligned(index, more, rng)])
+            picked = _greedy(cand[:, 2:4], np.full(len(cand), radius), need, fixed_xy, fixed_r)
+        return cand[picked]
 
-    def _parked(
-        self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n: int
-    ) -> dict[str, np.ndarray]:
+    def _parked(self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n: int) -> np.ndarray:
         """Up to n parked agents at roadside spots, `min_agent_distance` apart (section 2.2)."""
         cand = sample_on_chunks(index, index.roadside, box, rng, n * self.candidates_per_agent)
         length, width, _ = self.sizes.sample(rng, len(cand.lane))
-        lane_w = index.road_map.lanes.width[cand.lane].astype(np.float64)
-        off = roadside_offset(
-            lane_w, index.roadside.edge[cand.chunk], width, self.curb_gap, self.max_shoulder
-        )
-        xy = offset_right(cand.xy, cand.heading, off)
+        xy, off, _ = self._roadside(index, cand, width, 0.0)
         k = _greedy(xy, np.full(len(xy), self.min_agent_distance / 2), n)
-        on_lane = off[k] <= lane_w[k] / 2
-        return {
-            "lane": cand.lane[k],
-            "s": cand.s[k],
-            "xy": xy[k],
-            "heading": cand.heading[k],
-            "speed": np.zeros(len(k)),
-            "length": length[k],
-            "width": width[k],
-            "parked": np.ones(len(k), bool),
-            "on_lane": on_lane,
-        }
+        out = np.empty((len(k), len(AGENT_COLUMNS)))
+        out[:, 0] = cand.lane[k]
+        out[:, 1] = cand.s[k]
+        out[:, 2:4] = xy[k]
+        out[:, 4] = cand.heading[k]
+        out[:, 5] = 0.0
+        out[:, 6] = length[k]
+        out[:, 7] = width[k]
+        out[:, 8] = 1.0
+        out[:, 9] = off[k] <= index.road_map.lanes.width[cand.lane[k]].astype(np.float64) / 2
+        return out
 
-    def _aligned(self, index: MapIndex, poses: Poses, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """Aligned-agent candidates at `poses`: sizes, lateral shift, heading noise, speed."""
+    def _roadside(
+        self, index: MapIndex, cand: Poses, width: np.ndarray, min_free: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Roadside poses of vehicles of `width` parked at the candidates (`roadside_offset`
+        then `offset_right`, kernel `_sim.spawn.roadside_poses`): centres (n, 2), lateral
+        offsets (n,) and whether each leaves `min_free` m of its lane free."""
+        n = len(cand.lane)
+        xy, off, fits = np.empty((n, 2)), np.empty(n), np.empty(n, dtype=bool)
+        roadside_poses(
+            cand.lane, cand.chunk, cand.xy, np.sin(cand.heading), np.cos(cand.heading), width,
+            index.road_map.lanes.width, index.roadside.edge, self.curb_gap, self.max_shoulder,
+            min_free, xy, off, fits,
+        )  # fmt: skip
+        return xy, off, fits
+
+    def _aligned(self, index: MapIndex, poses: Poses, rng: np.random.Generator) -> np.ndarray:
+        """Aligned-agent candidates at `poses`: sizes, lateral shift, heading noise, speed
+        (kernel `_sim.spawn.aligned_candidates`); (n, 10) rows."""
         n = len(poses.lane)
         length, width, _ = self.sizes.sample(rng, n)
         u = rng.random((3, n))
         lanes = index.road_map.lanes
-        lane_w = lanes.width[poses.lane].astype(np.float64)
-        lateral = np.minimum(self.lateral_noise, np.maximum(lane_w - width, 0.0) / 2) * (2 * u[0] - 1)
-        heading = wrap_angle(poses.heading + self.heading_noise * (2 * u[1] - 1))
+        out = np.empty((n, len(AGENT_COLUMNS)))
         lo, hi = self.initial_speed
-        speed = np.minimum(lo + (hi - lo) * u[2], lanes.speed_limit[poses.lane])
-        return {
-            "lane": poses.lane,
-            "s": poses.s,
-            "xy": offset_right(poses.xy, poses.heading, lateral),
-            "heading": heading,
-            "speed": speed,
-            "length": length,
-            "width": width,
-            "parked": np.zeros(n, bool),
-            "on_lane": np.ones(n, bool),
-        }
+        aligned_candidates(
+            poses.lane, poses.s, poses.xy, poses.heading, np.sin(poses.heading), np.cos(poses.heading),
+            length, width, u, lanes.width, lanes.speed_limit, self.lateral_noise, self.heading_noise,
+            lo, hi, out,
+        )  # fmt: skip
+        return out
 
     @staticmethod
-    def _write_agents(sc: Scenario, a: dict[str, np.ndarray]) -> None:
-        n = len(a["lane"])
+    def _write_agents(sc: Scenario, a: np.ndarray) -> None:
+        n = len(a)
         sc.agent_valid[:n] = True
-        sc.agent_xy[:n] = a["xy"]
-        sc.agent_heading[:n] = a["heading"]
-        sc.agent_speed[:n] = a["speed"]
-        sc.agent_length[:n] = a["length"]
-        sc.agent_width[:n] = a["width"]
-        sc.agent_parked[:n] = a["parked"]
-        sc.agent_lane[:n] = np.where(a["on_lane"], a["lane"], -1)
+        sc.agent_xy[:n] = a[:, 2:4]
+        sc.agent_heading[:n] = a[:, 4]
+        sc.agent_speed[:n] = a[:, 5]
+        sc.agent_length[:n] = a[:, 6]
+        sc.agent_width[:n] = a[:, 7]
+        sc.agent_parked[:n] = a[:, 8] != 0
+        sc.agent_lane[:n] = np.where(a[:, 9] != 0, a[:, 0], -1)
 
     def _waypoints(
         self, sc: Scenario, index: MapIndex, lane: np.ndarray, s: np.ndarray, rng: np.random.Generator
     ) -> None:
-        """Random legal routes from (lane, s) and up to K waypoints along them (section 2.2)."""
+        """Random legal routes from (lane, s) and up to K waypoints along them (section 2.2):
+        `maps.routing.sample_routes` + `batch_waypoints` (same draws, same results) fused in
+        one kernel call (`_sim.spawn.RouteKernel.waypoints`)."""
         n = len(lane)
         times = waypoint_times(
             rng, n, self.max_waypoints, self.waypoint_spacing, self.waypoint_spacing_jitter
         )
-        routes = sample_routes(index.routes, lane, s, times[:, -1], rng, self.lane_change_prob)
-        sc.waypoints[:n], sc.num_waypoints[:n] = batch_waypoints(index.routes, routes, times)
+        key = int(rng.integers(0, 2**63))  # the key sample_routes draws
+        index.kernels.routes.waypoints(
+            np.ascontiguousarray(lane, dtype=np.int64),
+            np.ascontiguousarray(s, dtype=np.float64),
+            times,
+            key,
+            self.lane_change_prob,
+            MIN_CHANGE_LENGTH,
+            MAX_ROUTE_PIECES,
+            sc.waypoints,
+            sc.num_waypoints,
+        )
 
     # -- static vehicles ------------------------------------------------------------------------
 
@@ -376,14 +390,10 @@ class PaperSpawner:
             return
         cand = sample_on_chunks(index, index.roadside, box, rng, want * self.static_candidates_per_vehicle)
         length, width, _ = self.static_sizes.sample(rng, len(cand.lane))
-        lane_w = index.road_map.lanes.width[cand.lane].astype(np.float64)
-        off = roadside_offset(
-            lane_w, index.roadside.edge[cand.chunk], width, self.curb_gap, self.max_shoulder
-        )
         # section 2.2: stationary vehicles must not block a lane completely
-        fits = off - width / 2 + lane_w / 2 >= self.min_free_lane_width
+        xy, _, fits = self._roadside(index, cand, width, self.min_free_lane_width)
         keep = np.flatnonzero(fits)
-        xy = offset_right(cand.xy[keep], cand.heading[keep], off[keep])
+        xy = xy[keep]
         r = _half_diag(length[keep], width[keep])
         k = _greedy(xy, r, want, veh_xy, veh_r, gap=self.static_gap)
         m = len(k)

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from selfplaydrive._sim.spawn import vehicle_sizes
 from selfplaydrive.errors import ConfigError
 
 MAX_WIDTH = 2.55  # [m] EU limit for road vehicles (Directive 96/53/EC)
@@ -80,9 +81,7 @@ class VehicleSizeSampler:
         Returns:
             length (n,) float64 [m], width (n,) float64 [m], category index (n,) int64.
         """
+        # one (3, n) draw; the kernel picks the category (first cdf entry above u[0]) and
+        # computes length * (1 - j + 2 j u[1]) and min(width * (1 - j + 2 j u[2]), max_width)
         u = rng.random((3, n))
-        cat = np.minimum(np.searchsorted(self._cdf, u[0], side="right"), len(self.probs) - 1)
-        j = self.jitter
-        length = self.length[cat] * (1.0 - j + 2.0 * j * u[1])
-        width = np.minimum(self.width[cat] * (1.0 - j + 2.0 * j * u[2]), self.max_width)
-        return length, width, cat
+        return vehicle_sizes(u, self._cdf, self.length, self.width, self.jitter, self.max_width)

@@ -44,8 +44,11 @@ class Dims:
             G=G,
             max_obj=max_obj,
             max_road=max_road,
-            # the observation stage keeps a body table (8 floats) and candidates in the scratch
-            cand_cap=max(cand_cap, 10 * (len(sc.agent_valid) + len(sc.static_valid) + len(sc.ped_valid))),
+            # the observation stage keeps a body table (8 floats) and candidates in the scratch,
+            # the collision pre-test 3 floats per body (slot counts padded to multiples of 4)
+            cand_cap=max(
+                cand_cap, 10 * (len(sc.agent_valid) + len(sc.static_valid) + len(sc.ped_valid)) + 32
+            ),
             obs_dim=obs_dim,
         )
 

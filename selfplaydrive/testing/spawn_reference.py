@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH, RouteBatch, RouteTables, _empty_batch
-from selfplaydrive.scenario.index import Chunks, MapIndex
+from selfplaydrive.scenario.index import Chunks, Crossings, MapIndex
 from selfplaydrive.scenario.placement import Poses
 
 
@@ -204,3 +204,152 @@ def greedy_separated_reference(
         acc_xy = np.concatenate([acc_xy, p[new]])
         acc_r = np.concatenate([acc_r, r[new]])
     return np.asarray(accepted, dtype=np.int64)
+
+
+def pedestrian_paths_reference(
+    crosswalks: Crossings,
+    crossings: Crossings,
+    box: np.ndarray,
+    u: np.ndarray,
+    share: float,
+    margin: float,
+    max_approach: float,
+    vehicle_xy: np.ndarray,
+    clear_r: np.ndarray,
+    still: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy reference of the pedestrian kernel `_sim.spawn.pedestrian_paths` (with the site
+    query `pedestrian_sites`): for draws u (n, 9), the (n, 3, 2) paths (approach point,
+    crossing start, crossing end) and (n,) ok: the first point keeps clear_r from every
+    vehicle centre and no leg passes within clear_r of a vehicle with `still` set."""
+    cw, other = crosswalks.cells.query_box(box), crossings.cells.query_box(box)
+    n_cw, n_other = len(cw), len(other)
+    use_cw = (u[:, 0] < share) if n_cw else np.zeros(len(u), dtype=bool)
+    site = np.where(use_cw, u[:, 1] * n_cw, n_cw + u[:, 1] * n_other).astype(np.int64)
+    pick = np.minimum(site, np.where(use_cw, n_cw, n_cw + n_other) - 1)  # u * n may round up to n
+    start = np.concatenate([crosswalks.start[cw], crossings.start[other]])[pick]
+    end = np.concatenate([crosswalks.end[cw], crossings.end[other]])[pick]
+    half = np.concatenate([crosswalks.half_width[cw], crossings.half_width[other]])[pick]
+    # sideways shift inside a crosswalk, walking direction, kerb side and length of the approach
+    d = end - start
+    d = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+    side = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    shift = (half * (2.0 * u[:, 2] - 1.0))[:, None] * side
+    flip = (u[:, 3] < 0.5)[:, None]
+    a = np.where(flip, end, start) + shift
+    b = np.where(flip, start, end) + shift
+    d = np.where(flip, -d, d)
+    a = a - d * margin
+    b = b + d * margin
+    sign = np.where(u[:, 4] < 0.5, -1.0, 1.0)
+    approach = a + side * (sign * max_approach * u[:, 5])[:, None]
+    path = np.stack([approach, a, b], axis=1)
+    ok = np.ones(len(u), dtype=bool)
+    if len(vehicle_xy):
+        p = path[:, 0]
+        dist = np.hypot(p[:, None, 0] - vehicle_xy[None, :, 0], p[:, None, 1] - vehicle_xy[None, :, 1])
+        ok &= np.all(dist >= clear_r[None, :], axis=1)
+    if np.any(still):
+        xy, r = vehicle_xy[still], clear_r[still]
+        a = path[:, :-1, None, :]  # (n, T-1, 1, 2)
+        d = path[:, 1:, None, :] - a
+        w = xy[None, None, :, :] - a  # (n, T-1, V, 2)
+        t = np.clip(np.sum(w * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-12), 0.0, 1.0)
+        gap = w - t[..., None] * d
+        ok &= np.all(np.sum(gap * gap, axis=-1) >= (r**2)[None, None, :], axis=(1, 2))
+    return path, ok
+
+
+def vehicle_sizes_reference(
+    u: np.ndarray, cdf: np.ndarray, length: np.ndarray, width: np.ndarray, jitter: float, max_width: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """NumPy reference of `_sim.spawn.vehicle_sizes` (`VehicleSizeSampler.sample` after its
+    (3, n) draw): category, then jittered length and capped width."""
+    cat = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(cdf) - 1)
+    j = jitter
+    return (
+        length[cat] * (1.0 - j + 2.0 * j * u[1]),
+        np.minimum(width[cat] * (1.0 - j + 2.0 * j * u[2]), max_width),
+        cat,
+    )
+
+
+def aligned_candidates_reference(
+    lane: np.ndarray,
+    s: np.ndarray,
+    xy: np.ndarray,
+    heading: np.ndarray,
+    length: np.ndarray,
+    width: np.ndarray,
+    u: np.ndarray,
+    lane_width: np.ndarray,
+    speed_limit: np.ndarray,
+    lateral_noise: float,
+    heading_noise: float,
+    speed: tuple[float, float],
+) -> np.ndarray:
+    """NumPy reference of `_sim.spawn.aligned_candidates`: (n, 10) agent rows (lane, s, x, y,
+    heading, speed, length, width, parked, on lane) of aligned candidates."""
+    from selfplaydrive.scenario.placement import offset_right, wrap_angle
+
+    lane_w = lane_width[lane].astype(np.float64)
+    lateral = np.minimum(lateral_noise, np.maximum(lane_w - width, 0.0) / 2) * (2 * u[0] - 1)
+    lo, hi = speed
+    return np.column_stack(
+        [
+            lane,
+            s,
+            offset_right(xy, heading, lateral),
+            wrap_angle(heading + heading_noise * (2 * u[1] - 1)),
+            np.minimum(lo + (hi - lo) * u[2], speed_limit[lane]),
+            length,
+            width,
+            np.zeros(len(lane)),
+            np.ones(len(lane)),
+        ]
+    ).astype(np.float64)
+
+
+def roadside_poses_reference(
+    lane: np.ndarray,
+    chunk: np.ndarray,
+    xy: np.ndarray,
+    heading: np.ndarray,
+    width: np.ndarray,
+    lane_width: np.ndarray,
+    edge: np.ndarray,
+    curb_gap: float,
+    max_shoulder: float,
+    min_free: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """NumPy reference of `_sim.spawn.roadside_poses`: centres, offsets and the free-lane test
+    of vehicles parked at the roadside (`roadside_offset` then `offset_right`)."""
+    from selfplaydrive.scenario.placement import offset_right, roadside_offset
+
+    lane_w = lane_width[lane].astype(np.float64)
+    off = roadside_offset(lane_w, edge[chunk], width, curb_gap, max_shoulder)
+    fits = off - width / 2 + lane_w / 2 >= min_free
+    return offset_right(xy, heading, off), off, fits
+
+
+def bimodal_uniform_reference(
+    u: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    c: int,
+    c_range: tuple[float, float],
+    p_c: float,
+    a: int,
+    a_range: tuple[float, float],
+    p_a: float,
+) -> np.ndarray:
+    """NumPy reference of `_sim.spawn.bimodal_uniform` (`ConditioningSampler.sample` after
+    its draw): per-agent ranges, columns c and a switched to their low mode by the last two
+    columns of u, then lo + (hi - lo) u as float32."""
+    k = len(lo)
+    lo = np.broadcast_to(lo, (len(u), k)).copy()
+    hi = np.broadcast_to(hi, lo.shape).copy()
+    low_c, low_a = u[:, k] < p_c, u[:, k + 1] < p_a
+    lo[low_c, c], hi[low_c, c] = c_range
+    lo[low_a, a], hi[low_a, a] = a_range
+    return (lo + (hi - lo) * u[:, :k]).astype(np.float32)

@@ -19,7 +19,15 @@ from selfplaydrive.scenario.placement import (
 )
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.scenario.vehicles import DEFAULT_CATEGORIES, VehicleSizeSampler
-from selfplaydrive.testing.spawn_reference import greedy_separated_reference, sample_on_chunks_reference
+from selfplaydrive.testing.spawn_reference import (
+    aligned_candidates_reference,
+    bimodal_uniform_reference,
+    greedy_separated_reference,
+    pedestrian_paths_reference,
+    roadside_poses_reference,
+    sample_on_chunks_reference,
+    vehicle_sizes_reference,
+)
 
 
 @pytest.fixture(scope="module")
@@ -193,6 +201,86 @@ def test_no_roadside_spots_near_crosswalks_or_junction_mouths(grid_map):
     at_junction_end = np.array([any(lanes.in_junction[lanes.successors(int(i))]) for i in idx.roadside.lane])
     room = t.length[idx.roadside.lane] - idx.roadside.s1
     assert np.all(room[at_junction_end] >= 5.0 - 1e-6)
+
+
+def test_pedestrian_kernel_matches_reference(grid_map):
+    """Site choice, paths and clearance tests of the kernel equal the NumPy reference bit for
+    bit, on random draws with vehicles that block some paths (moving and standing)."""
+    from selfplaydrive._sim.spawn import pedestrian_paths, pedestrian_sites
+
+    idx = map_index(grid_map)
+    rng = np.random.default_rng(8)
+    blocked = total = 0
+    for trial in range(40):
+        box = np.array([-100.0, -100.0, 100.0, 100.0]) + rng.uniform(-60, 60, 2).repeat(2)
+        n_cw, n_other, cw, other = pedestrian_sites(idx.crosswalks.kernel, idx.crossings.kernel, box)
+        if n_cw + n_other == 0:
+            continue
+        u = rng.random((8, 9))
+        share = (0.5 if trial % 2 else 1.0) if n_other else 1.0
+        vxy = rng.uniform(-100, 100, (30, 2))
+        r = rng.uniform(1.0, 8.0, 30)
+        still = rng.random(30) < 0.5
+        path, ok = np.empty((8, 3, 2)), np.empty(8, dtype=bool)
+        pedestrian_paths(idx.crosswalks.kernel, idx.crossings.kernel, cw, other, u, share, 1.0, 5.0,
+                         vxy, r, still, path, ok)  # fmt: skip
+        want_path, want_ok = pedestrian_paths_reference(
+            idx.crosswalks, idx.crossings, box, u, share, 1.0, 5.0, vxy, r, still
+        )
+        np.testing.assert_array_equal(path, want_path)
+        np.testing.assert_array_equal(ok, want_ok)
+        blocked += int((~ok).sum())
+        total += len(ok)
+    assert total > 100 and 0 < blocked < total  # the clearance tests decided some
+
+
+def test_placement_kernels_match_references(grid_map):
+    """Vehicle sizes, aligned candidates, roadside poses and the bimodal coefficient draw of
+    the spawner kernels equal their NumPy references bit for bit on random inputs (headings
+    around the +-pi wrap, lanes narrower than vehicles, edges missing)."""
+    from selfplaydrive._sim.spawn import aligned_candidates, bimodal_uniform, roadside_poses, vehicle_sizes
+
+    idx = map_index(grid_map)
+    lanes = grid_map.lanes
+    rng = np.random.default_rng(9)
+    sizes = VehicleSizeSampler()
+    for n in (0, 1, 7, 300):
+        u = rng.random((3, n))
+        got = vehicle_sizes(u, sizes._cdf, sizes.length, sizes.width, sizes.jitter, sizes.max_width)
+        want = vehicle_sizes_reference(
+            u, sizes._cdf, sizes.length, sizes.width, sizes.jitter, sizes.max_width
+        )
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)
+        length, width, _ = got
+        lane = rng.integers(0, len(lanes.width), n)
+        s = rng.uniform(0, 50, n)
+        xy = rng.uniform(-100, 100, (n, 2))
+        heading = rng.uniform(-np.pi, np.pi, n)
+        heading[: n // 3] = np.pi - rng.uniform(0, 1e-3, n // 3)  # noise crosses the wrap
+        u = rng.random((3, n))
+        out = np.empty((n, 10))
+        aligned_candidates(lane, s, xy, heading, np.sin(heading), np.cos(heading), length, width, u,
+                           lanes.width, lanes.speed_limit, 0.25, 0.05, 0.0, 5.0, out)  # fmt: skip
+        want = aligned_candidates_reference(
+            lane, s, xy, heading, length, width, u, lanes.width, lanes.speed_limit, 0.25, 0.05, (0.0, 5.0)
+        )
+        np.testing.assert_array_equal(out, want)
+        chunk = rng.integers(0, len(idx.roadside.edge), n)
+        edge = idx.roadside.edge.copy()
+        edge[rng.random(len(edge)) < 0.2] = np.inf
+        got = (np.empty((n, 2)), np.empty(n), np.empty(n, dtype=bool))
+        roadside_poses(lane, chunk, xy, np.sin(heading), np.cos(heading), width, lanes.width, edge,
+                       0.3, 1.0, 1.0, *got)  # fmt: skip
+        want = roadside_poses_reference(lane, chunk, xy, heading, width, lanes.width, edge, 0.3, 1.0, 1.0)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)
+        u = rng.random((n, 10))
+        lo, hi = rng.uniform(0, 1, 8), rng.uniform(1, 2, 8)
+        np.testing.assert_array_equal(
+            bimodal_uniform(u, lo, hi, 5, 0.0, 0.1, 0.5, 7, 0.0, 0.2, 0.3),
+            bimodal_uniform_reference(u, lo, hi, 5, (0.0, 0.1), 0.5, 7, (0.0, 0.2), 0.3),
+        )
 
 
 def test_pedestrian_paths_avoid_stationary_vehicles(grid_map):
