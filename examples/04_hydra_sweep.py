@@ -7,7 +7,7 @@ The command it runs (the full version; --tiny keeps seed=0 only and shrinks ever
         trainer.eval_episodes=0 trainer.progress_bar=false hydra.sweep.dir=<folder>
 
 `-m` runs the Cartesian product of the comma-separated values, one run folder per
-combination (`<job number>_<overrides>` under hydra.sweep.dir). Each folder holds
+combination, numbered 0, 1, ... under hydra.sweep.dir. Each folder holds
 resolved_config.yaml (the full config after interpolation), run_meta.json (git commit, seed,
 overrides, the chosen config options, the command line), the trainer's config.json,
 run_info.json, tb/ (TensorBoard) and checkpoints/. Running the sweep in parallel: see
@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 import yaml
-from _tiny import TINY_OVERRIDES, folder_name_excludes, is_tiny, run, selfplaydrive_command
+from _tiny import TINY_OVERRIDES, is_tiny, run, selfplaydrive_command
 
 SWEEP = ("reward.collision.high=0.5,1.0", "physics=bicycle,friction")
 
@@ -51,7 +51,6 @@ def sweep(out: Path, tiny: bool) -> None:
     run(
         [
             *args,
-            folder_name_excludes([f for f in fixed if not f.startswith("seed")]),
             f"hydra.sweep.dir={out}",
         ]
     )

@@ -27,7 +27,7 @@ import math
 import tempfile
 from pathlib import Path
 
-from _tiny import TINY_OVERRIDES, folder_name_excludes, is_tiny, run, selfplaydrive_command
+from _tiny import TINY_OVERRIDES, is_tiny, run, selfplaydrive_command
 
 TERMS = ("waypoint", "collision", "offroad", "red_light", "comfort", "center", "align", "velocity")
 CHARTS = ("collision_rate", "offroad_rate", "waypoint_completion", "return_mean")
@@ -38,7 +38,6 @@ def launch(out: Path, tiny: bool, steps: int | None) -> None:
     fixed = [*TINY_OVERRIDES, "seed=0"] if tiny else []
     if steps is not None:
         fixed.append(f"trainer.total_steps={steps}")
-    excludes = [folder_name_excludes([f for f in fixed if not f.startswith("seed")])] if tiny else []
     run(
         [
             *selfplaydrive_command(),
@@ -46,7 +45,6 @@ def launch(out: Path, tiny: bool, steps: int | None) -> None:
             "-m",
             "experiment=ablate_collision",
             *fixed,
-            *excludes,
             f"hydra.sweep.dir={out}",
         ]
     )

@@ -39,17 +39,6 @@ def is_tiny(flag: bool) -> bool:
     return flag or os.environ.get("SELFPLAYDRIVE_EXAMPLE_TINY") == "1"
 
 
-def folder_name_excludes(overrides: tuple[str, ...] | list[str]) -> str:
-    """A Hydra override that keeps the given keys out of the run folder names.
-
-    Sweep run folders are named `<job number>_<override_dirname>` (conf/train.yaml); every
-    command-line override is part of that name, and 20 of them pass the 255-character limit of
-    a file name. Excluding the fixed settings leaves only the swept keys in the name.
-    """
-    keys = sorted({o.split("=", 1)[0].lstrip("+~") for o in overrides})
-    return f"hydra.job.config.override_dirname.exclude_keys=[{','.join(keys)}]"
-
-
 def selfplaydrive_command() -> list[str]:
     """The `selfplaydrive` script, or `python -m selfplaydrive.cli` when it is not on PATH."""
     exe = shutil.which("selfplaydrive")
