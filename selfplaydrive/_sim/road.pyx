@@ -22,7 +22,7 @@ cdef extern from "scan.h" nogil:
     void spd_scan_columns(const float* mx, const float* my, const int32_t* cols, int ncols,
                           float x, float y, int32_t ilo, int32_t ihi, int32_t iev,
                           int32_t* inner, int* ni, int32_t* shell, float* shell_d, int* ns,
-                          int32_t* ev, int* ne)
+                          int32_t* ev, float* ev_d, int* ne)
 
 # grid columns collected before one call of the scan (scan.h spd_scan_columns)
 DEF COLS = 48
@@ -103,7 +103,7 @@ cdef void road_agent(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
         # first gather of an episode, or a scratch overflow: events disc, then the bounded
         # split (when a bound exists) or the ring search
         n = scan_disc(atlas, m, x, y, ev, cand, cd, cap)
-        road_events(sim, atlas, prm, w, i, cand, n, near * near, lane_far * lane_far, box_r, step)
+        road_events(sim, atlas, prm, w, i, cand, cd, n, near * near, lane_far * lane_far, box_r, step)
         if prev >= 0.0:
             keep = nearest_in_bounds(sim, atlas, w, i, lo, hi, cand, cd, &dmax2)
         if keep < 0:
@@ -143,6 +143,7 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
     cdef float* cd = sim.cand_d + <int64_t>w * cap
     cdef int32_t* inner = cand            # [0, q): kept for sure
     cdef int32_t* evl = cand + q          # [q, 2q): within the events radius
+    cdef float* evl_d = cd + q            # their squared distances
     cdef int32_t* shell = cand + 2 * q    # [2q, cap): to be selected, with distances
     cdef float* shell_d = cd + 2 * q
     cdef int scap = cap - 2 * q
@@ -179,13 +180,13 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
         nc += 1
         if nc == COLS:
             spd_scan_columns(atlas.seg_mx, atlas.seg_my, cols, nc, x, y, ilo, ihi, iev, inner,
-                             &ni, shell, shell_d, &ns, evl, &ne)
+                             &ni, shell, shell_d, &ns, evl, evl_d, &ne)
             nc = 0
     spd_scan_columns(atlas.seg_mx, atlas.seg_my, cols, nc, x, y, ilo, ihi, iev, inner, &ni,
-                     shell, shell_d, &ns, evl, &ne)
+                     shell, shell_d, &ns, evl, evl_d, &ne)
     if ni >= maxr:
         return -1
-    road_events(sim, atlas, prm, w, i, evl, ne, near2, lane_far2, box_r, step)
+    road_events(sim, atlas, prm, w, i, evl, evl_d, ne, near2, lane_far2, box_r, step)
     memcpy(out, inner, ni * sizeof(int32_t))
     keep = min(ni + ns, maxr)
     b = keep - ni
@@ -373,15 +374,16 @@ cdef inline int count_within(const float* cd, int n, float r2) noexcept nogil:
 
 
 cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i,
-                      const int32_t* cand, int n, float near2, float lane_far2, float box_r,
-                      float moved) noexcept nogil:
+                      const int32_t* cand, const float* cand_d, int n, float near2,
+                      float lane_far2, float box_r, float moved) noexcept nogil:
     """Road-edge contact, red-light crossing and lane association from the n candidates (atlas
-    positions covering every segment within reach of the box and of lane_radius; box_r: the
+    positions covering every segment within reach of the box and of lane_radius, with their
+    squared midpoint distances from the scan in `cand_d`; box_r: the
     box's bounding radius, moved: this step's displacement [m]). Before an exact test, a
     candidate is dropped when its midpoint is farther than the test's reach plus half its
     own length (plus EPAD): then no point of it can pass the test, so no result changes."""
     cdef int t, p, g, ty, best_c = -1, best_a = -1
-    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld, ex, ey
+    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld
     cdef float hl = 0.5 * sim.length[i], hw = 0.5 * sim.width[i], R2 = prm.obs_radius * prm.obs_radius
     cdef float dc = 1e30, da = 1e30, lr2 = prm.lane_radius * prm.lane_radius, rr
     cdef float lane_reach = prm.lane_radius + EPAD, box_reach = box_r + EPAD
@@ -389,16 +391,13 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
     cdef unsigned char bits = 0
     for t in range(n):
         p = cand[t]
-        # the scan's squared midpoint distance, recomputed with the same float operations
-        ex = atlas.seg_mx[p] - x
-        ey = atlas.seg_my[p] - y
-        d2 = ex * ex + ey * ey
+        d2 = cand_d[t]
         if d2 > R2 or (d2 > near2 and d2 > lane_far2):
             continue
         ty = atlas.seg_type[p]
         if ty == SEG_LANE:
             if d2 <= lane_far2:
-                rr = lane_reach + 0.5 * atlas.seg_len[p]
+                rr = lane_reach + <float>0.5 * atlas.seg_len[p]
                 if d2 > rr * rr:
                     continue
                 ld = point_seg_d2(atlas, p, x, y)
@@ -414,13 +413,13 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
         elif d2 <= near2 and ty == SEG_EDGE:
             if bits & EV_OFFROAD:
                 continue  # already set: more contacts change nothing
-            rr = box_reach + 0.5 * atlas.seg_len[p]
+            rr = box_reach + <float>0.5 * atlas.seg_len[p]
             if d2 <= rr * rr and box_touches(atlas, p, x, y, c, sn, hl, hw):
                 bits |= EV_OFFROAD
         elif d2 <= near2 and ty == SEG_LIGHT:
             if bits & EV_RED:
                 continue
-            rr = swept_reach + 0.5 * atlas.seg_len[p]
+            rr = swept_reach + <float>0.5 * atlas.seg_len[p]
             if d2 > rr * rr:
                 continue
             g = atlas.seg_group[p]

@@ -57,9 +57,10 @@ static inline void spd_road_light(float *r, const float *rec, const int8_t *gsta
 }
 
 /* The road features as columns, for blocks of rows whose segments are consecutive atlas
- * positions p0 .. p0 + 3 (or 7): mid x, mid y, dir x, dir y, length, type at mx[p], my[p],
- * cols[k * stride + p] (k = 0..3), and the group and global index (sim/atlas.py). The
- * values are the records' own, so a block read from columns gives the same rows. */
+ * positions p0 .. p0 + 3 (read by the SSE2 version only): mid x, mid y, dir x, dir y,
+ * length, type at mx[p], my[p], cols[k * stride + p] (k = 0..3), and the group and global
+ * index (sim/atlas.py). The values are the records' own, so a block read from columns gives
+ * the same rows. */
 typedef struct {
     const float *mx, *my, *cols;
     ptrdiff_t stride;
@@ -262,6 +263,12 @@ static inline SPD_AVX2 void spd_tr8(__m256 *r) {
     r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
+/* Eight rows at a time from the packed records (transposed in and out). Unlike the SSE2
+ * version, blocks of consecutive atlas positions are not read from the feature columns: the
+ * columns take fewer instructions but touch eight arrays (eight cache lines per block where
+ * the records take four), and with 32 worlds the map data of a step does not stay in the
+ * per-core caches: reading the records was 4-6 % faster per agent-step (interleaved
+ * timings, docs/world.md "Performance"). */
 static SPD_AVX2 int spd_road_rows_avx2(float *o, int32_t *idx, int n, const float *recs,
                                        const spd_road_cols *rc, float x, float y, float c,
                                        float s, float cp, float sp, const int8_t *gstate,
@@ -271,41 +278,21 @@ static SPD_AVX2 int spd_road_rows_avx2(float *o, int32_t *idx, int n, const floa
     const __m256 X = _mm256_set1_ps(x), Y = _mm256_set1_ps(y), C = _mm256_set1_ps(c);
     const __m256 S = _mm256_set1_ps(s), NS = _mm256_set1_ps(-s), CP = _mm256_set1_ps(cp);
     const __m256 SP = _mm256_set1_ps(sp), NSP = _mm256_set1_ps(-sp);
-    const __m256i iota = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
-    const ptrdiff_t st = rc->stride;
     int k = 0, j;
+    (void)rc;
     for (; k + 8 <= n; k += 8) {
         __m256 v[8];
         const float *q[8];
         float *r = o + 8 * (ptrdiff_t)k;
-        int lights, run, p0 = idx[k];
-        __m256i ib = _mm256_loadu_si256((const __m256i *)(idx + k));
-        run = _mm256_movemask_ps(_mm256_castsi256_ps(
-                  _mm256_cmpeq_epi32(ib, _mm256_add_epi32(_mm256_set1_epi32(p0), iota)))) == 255;
-        if (run) {
-            /* consecutive segments (most blocks: the gather lists runs of atlas positions):
-             * the features straight from the columns, no transpose */
-            __m256i g = _mm256_loadu_si256((const __m256i *)(rc->group + p0));
-            v[0] = _mm256_loadu_ps(rc->mx + p0);
-            v[1] = _mm256_loadu_ps(rc->my + p0);
-            v[2] = _mm256_loadu_ps(rc->cols + p0);
-            v[3] = _mm256_loadu_ps(rc->cols + st + p0);
-            v[4] = _mm256_loadu_ps(rc->cols + 2 * st + p0);
-            v[5] = _mm256_loadu_ps(rc->cols + 3 * st + p0);
-            lights = _mm256_movemask_ps(
-                _mm256_castsi256_ps(_mm256_cmpgt_epi32(g, _mm256_set1_epi32(-1))));
-            _mm256_storeu_si256((__m256i *)(idx + k),
-                                _mm256_loadu_si256((const __m256i *)(rc->id + p0)));
-        } else {
-            const int32_t *ip = idx + k;
-            for (j = 0; j < 8; j++) {
-                q[j] = recs + 8 * (ptrdiff_t)ip[j];
-                v[j] = _mm256_loadu_ps(q[j]);
-            }
-            spd_tr8(v); /* mid x, mid y, dir x, dir y, length, type, group, global index */
-            lights = _mm256_movemask_ps(_mm256_cmp_ps(v[6], zero, _CMP_GE_OQ));
-            _mm256_storeu_si256((__m256i *)(idx + k), _mm256_castps_si256(v[7]));
+        const int32_t *ip = idx + k;
+        int lights;
+        for (j = 0; j < 8; j++) {
+            q[j] = recs + 8 * (ptrdiff_t)ip[j];
+            v[j] = _mm256_loadu_ps(q[j]);
         }
+        spd_tr8(v); /* mid x, mid y, dir x, dir y, length, type, group, global index */
+        lights = _mm256_movemask_ps(_mm256_cmp_ps(v[6], zero, _CMP_GE_OQ));
+        _mm256_storeu_si256((__m256i *)(idx + k), _mm256_castps_si256(v[7]));
         {
             __m256 ux = _mm256_sub_ps(v[0], X), uy = _mm256_sub_ps(v[1], Y);
             __m256 dx = v[2], dy = v[3];
@@ -323,12 +310,8 @@ static SPD_AVX2 int spd_road_rows_avx2(float *o, int32_t *idx, int n, const floa
         }
         if (lights)
             for (j = 0; j < 8; j++)
-                if (lights >> j & 1) {
-                    if (run)
-                        spd_road_light_g(r + 8 * j, rc->group[p0 + j], gstate, G);
-                    else
-                        spd_road_light(r + 8 * j, q[j], gstate, G);
-                }
+                if (lights >> j & 1)
+                    spd_road_light(r + 8 * j, q[j], gstate, G);
     }
     return k;
 }

@@ -27,14 +27,15 @@ static inline int32_t spd_fbits(float f) {
 /* Arguments of every version, for one run [lo, lo + cnt) of atlas positions against (x, y):
  * ilo: bits of the inner bound (-1: no inner), ihi >= ilo: bits of the outer bound,
  * iev: bits of the events bound (used when with_ev).
- * inner[*ni...] and ev[*ne...] need room for cnt + 7 more entries (the packed stores write
- * whole vectors), shell[*ns...] and shell_d[*ns...] for cnt more. */
+ * inner[*ni...], ev[*ne...] and ev_d[*ne...] need room for cnt + 7 more entries (the packed
+ * stores write whole vectors), shell[*ns...] and shell_d[*ns...] for cnt more. ev_d gets the
+ * squared distance of each ev entry (the same float as the split used). */
 
 SPD_ALWAYS_INLINE void spd_scan_c(
     const float *restrict mx, const float *restrict my, int lo, int cnt, float x, float y,
     int32_t ilo, int32_t ihi, int32_t iev, int32_t *restrict inner, int *ni,
-    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev, int *ne,
-    const int with_ev) {
+    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev,
+    float *restrict ev_d, int *ne, const int with_ev) {
     /* pointer-sized counters: no sign extension per candidate */
     ptrdiff_t a = *ni, b = *ns, e = with_ev ? *ne : 0, t;
     uint32_t width = (uint32_t)ihi - (uint32_t)ilo;
@@ -47,6 +48,7 @@ SPD_ALWAYS_INLINE void spd_scan_c(
         a += di <= ilo;
         if (with_ev) {
             ev[e] = p;
+            ev_d[e] = d;
             e += di <= iev;
         }
         shell[b] = p;
@@ -70,8 +72,8 @@ static const int32_t spd_pop4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3
 SPD_ALWAYS_INLINE void spd_scan_sse2(
     const float *restrict mx, const float *restrict my, int lo, int cnt, float x, float y,
     int32_t ilo, int32_t ihi, int32_t iev, int32_t *restrict inner, int *ni,
-    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev, int *ne,
-    const int with_ev) {
+    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev,
+    float *restrict ev_d, int *ne, const int with_ev) {
     ptrdiff_t a = *ni, b = *ns, e = with_ev ? *ne : 0, t;
     uint32_t width = (uint32_t)ihi - (uint32_t)ilo;
     const float *px = mx + lo, *py = my + lo;
@@ -104,6 +106,13 @@ SPD_ALWAYS_INLINE void spd_scan_sse2(
         if (with_ev) {
             _mm_storeu_si128((__m128i *)(ev + e),
                              _mm_add_epi32(pos, _mm_load_si128((const __m128i *)spd_pack4[me])));
+            if (me) {
+                float dv[4];
+                int j;
+                _mm_storeu_ps(dv, d4);
+                for (j = 0; j < spd_pop4[me]; j++)
+                    ev_d[e + j] = dv[spd_pack4[me][j]];
+            }
             e += spd_pop4[me];
         }
         if (ms) {
@@ -150,8 +159,8 @@ static inline void spd_scan_tables(void) {
 SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
     const float *restrict mx, const float *restrict my, int lo, int cnt, float x, float y,
     int32_t ilo, int32_t ihi, int32_t iev, int32_t *restrict inner, int *ni,
-    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev, int *ne,
-    const int with_ev) {
+    int32_t *restrict shell, float *restrict shell_d, int *ns, int32_t *restrict ev,
+    float *restrict ev_d, int *ne, const int with_ev) {
     ptrdiff_t a = *ni, b = *ns, e = with_ev ? *ne : 0, t;
     uint32_t width = (uint32_t)ihi - (uint32_t)ilo;
     const float *px = mx + lo, *py = my + lo;
@@ -183,10 +192,9 @@ SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
                                       _mm_loadl_epi64((const __m128i *)spd_pack8[mi]))));
         a += spd_pop8[mi];
         if (with_ev) {
-            _mm256_storeu_si256(
-                (__m256i *)(ev + e),
-                _mm256_add_epi32(pos, _mm256_cvtepu8_epi32(
-                                          _mm_loadl_epi64((const __m128i *)spd_pack8[me]))));
+            __m256i lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[me]));
+            _mm256_storeu_si256((__m256i *)(ev + e), _mm256_add_epi32(pos, lane));
+            _mm256_storeu_ps(ev_d + e, _mm256_permutevar8x32_ps(d8, lane));
             e += spd_pop8[me];
         }
         if (ms) {
@@ -214,16 +222,16 @@ static SPD_AVX2 void spd_scan_columns_avx2(const float *mx, const float *my, con
                                            int ncols, float x, float y, int32_t ilo,
                                            int32_t ihi, int32_t iev, int32_t *inner, int *ni,
                                            int32_t *shell, float *shell_d, int *ns,
-                                           int32_t *ev, int *ne) {
+                                           int32_t *ev, float *ev_d, int *ne) {
     int k;
     for (k = 0; k < ncols; k++) {
         const int32_t *c = cols + 3 * k;
         if (c[2])
             spd_scan_avx2(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, iev, inner, ni, shell,
-                          shell_d, ns, ev, ne, 1);
+                          shell_d, ns, ev, ev_d, ne, 1);
         else
             spd_scan_avx2(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, -1, inner, ni, shell,
-                          shell_d, ns, NULL, NULL, 0);
+                          shell_d, ns, NULL, NULL, NULL, 0);
     }
 }
 #endif
@@ -242,21 +250,23 @@ static inline void spd_scan_split_c(const float *restrict mx, const float *restr
                                     int32_t *restrict inner, int *ni, int32_t *restrict shell,
                                     float *restrict shell_d, int *ns) {
     spd_scan_c(mx, my, lo, cnt, x, y, ilo, ihi, -1, inner, ni, shell, shell_d, ns, NULL, NULL,
-               0);
+               NULL, 0);
 }
 
 /* Grid columns of the road gather: column k is the atlas range [c[0], c[1]) (c = cols + 3k);
  * when c[2] is set (the column meets the events disc) the positions with squared distance
- * bits <= iev are listed in ev too. One call per agent (the loop setup is paid once). */
+ * bits <= iev are listed in ev, their squared distances in ev_d. One call per agent (the
+ * loop setup is paid once). */
 static inline void spd_scan_columns(const float *mx, const float *my, const int32_t *cols,
                                     int ncols, float x, float y, int32_t ilo, int32_t ihi,
                                     int32_t iev, int32_t *inner, int *ni, int32_t *shell,
-                                    float *shell_d, int *ns, int32_t *ev, int *ne) {
+                                    float *shell_d, int *ns, int32_t *ev, float *ev_d,
+                                    int *ne) {
     int k;
 #if SPD_HAVE_AVX2
     if (spd_simd >= 2) {
         spd_scan_columns_avx2(mx, my, cols, ncols, x, y, ilo, ihi, iev, inner, ni, shell,
-                              shell_d, ns, ev, ne);
+                              shell_d, ns, ev, ev_d, ne);
         return;
     }
 #endif
@@ -266,19 +276,19 @@ static inline void spd_scan_columns(const float *mx, const float *my, const int3
         if (spd_simd >= 1) {
             if (c[2])
                 spd_scan_sse2(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, iev, inner, ni, shell,
-                              shell_d, ns, ev, ne, 1);
+                              shell_d, ns, ev, ev_d, ne, 1);
             else
                 spd_scan_sse2(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, -1, inner, ni, shell,
-                              shell_d, ns, NULL, NULL, 0);
+                              shell_d, ns, NULL, NULL, NULL, 0);
             continue;
         }
 #endif
         if (c[2])
             spd_scan_c(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, iev, inner, ni, shell, shell_d,
-                       ns, ev, ne, 1);
+                       ns, ev, ev_d, ne, 1);
         else
             spd_scan_c(mx, my, c[0], c[1] - c[0], x, y, ilo, ihi, -1, inner, ni, shell, shell_d,
-                       ns, NULL, NULL, 0);
+                       ns, NULL, NULL, NULL, 0);
     }
 }
 

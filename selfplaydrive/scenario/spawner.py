@@ -13,8 +13,9 @@ the same seed gives the same `Scenario`):
    Candidates are accepted greedily in random order; their number is bounded (a first round of
    `first_round_candidates` per wanted agent, a second up to `candidates_per_agent` in all only
    when the first falls short), so infeasible settings never hang: the world gets fewer agents
-   and a `UserWarning` names the shortfall. Parked slots that find no roadside become aligned
-   agents; slots are shuffled so parked agents are spread over them.
+   and a `UserWarning` names the shortfall (once per spawner and map; every shortfall is
+   counted in `PaperSpawner.shortfalls` and `missing_agents`). Parked slots that find no
+   roadside become aligned agents; slots are shuffled so parked agents are spread over them.
 3. Waypoints: a random legal route from each agent's lane (`maps.routing.sample_routes`) and up
    to `max_waypoints` waypoints on average `waypoint_spacing` s apart at the speed limit.
 4. Static vehicles: U{static_count} parked vehicles at the roadside, not overlapping agents
@@ -97,6 +98,11 @@ class PaperSpawner:
         hidden: Hidden dynamics parameter sampler.
         pedestrians: Pedestrian sampler.
         lights: Traffic-light sampler.
+
+    Attributes:
+        shortfalls: Map name -> worlds sampled with fewer than `num_agents` agents (only the
+            first such world per map warns).
+        missing_agents: Map name -> agent slots left empty in those worlds, summed.
 
     Raises:
         ConfigError: On non-positive slot counts or out-of-range settings.
@@ -196,6 +202,10 @@ class PaperSpawner:
         self.hidden = hidden or HiddenParamSampler()
         self.pedestrians = pedestrians or PedestrianSampler()
         self.lights = lights or LightSampler()
+        # spawn shortfalls (worlds that got fewer than num_agents agents): the first one per map
+        # warns, every one is counted here
+        self.shortfalls: dict[str, int] = {}
+        self.missing_agents: dict[str, int] = {}
 
     def prepare(self, road_map: RoadMap) -> MapIndex:
         """Build (or fetch from the cache) the per-map tables; call once per map up front."""
@@ -261,15 +271,25 @@ class PaperSpawner:
                 f"{np.round(box, 1).tolist()}: the map has no spawnable lane there"
             )
         if got < want:
-            warnings.warn(
-                f"PaperSpawner placed {got} of num_agents={want} agents on map {index.road_map.name!r}: "
-                f"min_agent_distance={self.min_agent_distance} m could not be met within "
-                f"candidates_per_agent={self.candidates_per_agent} candidates per agent",
-                UserWarning,
-                stacklevel=3,
-            )
+            self._shortfall(index.road_map.name, got, want)
         order = rng.permutation(got)  # mix parked and aligned agents over the slots
         return out[order]
+
+    def _shortfall(self, name: str, got: int, want: int) -> None:
+        """Count a world spawned with `got` < `want` agents; warn only on the first per map."""
+        first = name not in self.shortfalls
+        self.shortfalls[name] = self.shortfalls.get(name, 0) + 1
+        self.missing_agents[name] = self.missing_agents.get(name, 0) + want - got
+        if first:
+            warnings.warn(
+                f"PaperSpawner placed {got} of num_agents={want} agents on map {name!r}: "
+                f"min_agent_distance={self.min_agent_distance} m could not be met within "
+                f"candidates_per_agent={self.candidates_per_agent} candidates per agent; further "
+                f"shortfalls on this map are not warned but counted in PaperSpawner.shortfalls "
+                f"(worlds) and PaperSpawner.missing_agents (agents)",
+                UserWarning,
+                stacklevel=4,
+            )
 
     def _spaced_aligned(
         self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, fixed_xy: np.ndarray, need: int

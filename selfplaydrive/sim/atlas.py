@@ -126,7 +126,7 @@ def build_atlas(
     rec[:, 6] = seg_group.astype(f4)
     rec[:, 7] = seg_id.view(f4)
     # the same features as columns (dir x, dir y, length, type), for blocks of rows whose
-    # segments are consecutive atlas positions (_sim/rows.h); 8 entries of padding each, like
+    # segments are consecutive atlas positions (_sim/rows.h, SSE2 version); 8 entries of padding, like
     # seg_mx, seg_my, seg_id and seg_group: the SIMD kernels read whole vectors
     pad = 8
     cols = np.zeros((4, len(seg_id) + pad), dtype=f4)

@@ -275,11 +275,13 @@ class VecEnv:
         for w in worlds:
             a = slice(w * A, (w + 1) * A)
             ever = b["ever"][a]
+            spawned = int(np.count_nonzero(b["agent_valid"][a]))
             rec: dict[str, object] = {
                 "world": int(w),
                 "map": int(b["map_id"][w]),
                 "length_s": float(b["step"][w] * self.params.dt),
-                "num_agents": int(np.count_nonzero(b["agent_valid"][a])),
+                "num_agents": spawned,
+                "spawn_shortfall": A - spawned,
                 "km": float(b["dist"][w] / 1000.0),
                 "terms": {n: float(v) for n, v in zip(TERM_NAMES, b["term_sum"][w], strict=True)},
                 "events": {n: int(v) for n, v in zip(EVENT_NAMES, b["ev_count"][w], strict=True)},
@@ -292,7 +294,8 @@ class VecEnv:
 
     def pop_episode_stats(self) -> list[dict[str, object]]:
         """Statistics of the episodes finished since the last call (per-term sums, event
-        counts, agents with at least one collision / off-road / red-light event, km driven)."""
+        counts, agents with at least one collision / off-road / red-light event, km driven,
+        `spawn_shortfall`: agent slots the spawner left empty in that episode)."""
         out, self.episode_stats = self.episode_stats, []
         return out
 

@@ -261,6 +261,23 @@ def test_tiny_map_warns_and_returns_fewer_agents(tiny_map):
     n = int(sc.agent_valid.sum())
     assert 1 <= n <= 6  # two 40 m lanes, 3.5 m apart, 15 m spacing
     assert pairwise(sc.agent_xy[sc.agent_valid].astype(np.float64)).min() >= 15.0 - 1e-3
+    assert sp.shortfalls == {"tiny": 1} and sp.missing_agents == {"tiny": 32 - n}
+
+
+def test_second_shortfall_counted_not_warned(tiny_map):
+    sp = PaperSpawner(num_agents=32)
+    with pytest.warns(UserWarning, match="further shortfalls on this map are not warned but counted"):
+        a = sp.sample(tiny_map, np.random.default_rng(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a second warning would raise here
+        b = sp.sample(tiny_map, np.random.default_rng(1))
+        c = sp.sample(tiny_map, np.random.default_rng(2))
+    missing = sum(32 - int(s.agent_valid.sum()) for s in (a, b, c))
+    assert sp.shortfalls == {"tiny": 3}
+    assert sp.missing_agents == {"tiny": missing}
+    # a fresh spawner warns again (the state is per spawner)
+    with pytest.warns(UserWarning, match="placed"):
+        PaperSpawner(num_agents=32).sample(tiny_map, np.random.default_rng(0))
 
 
 def test_no_spawnable_lane_raises(tiny_map):

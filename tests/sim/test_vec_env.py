@@ -68,6 +68,7 @@ def test_autoreset_truncation_final_observation_and_stats(straight_map):
     assert env.masks[[0, 1, 4, 5]].all()
     stats = env.pop_episode_stats()
     assert len(stats) == 2 and stats[0]["num_agents"] == 2
+    assert stats[0]["spawn_shortfall"] == env.agents_per_world - 2
     assert stats[0]["km"] == pytest.approx((10.0 + 5.0) * 1.0 / 1000.0, rel=1e-4)
     assert stats[0]["events"]["truncated"] == 2
     assert stats[0]["terms"]["velocity"] > 0

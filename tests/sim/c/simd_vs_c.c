@@ -20,9 +20,9 @@ void sse_obj_rows(float *, const int32_t *, int, const float *, float, float, fl
 void c_obj_rows(float *, const int32_t *, int, const float *, float, float, float, float, float, float,
                 float, float);
 void sse_scan(const float *, const float *, const int32_t *, int, float, float, int32_t, int32_t, int32_t,
-              int32_t *, int *, int32_t *, float *, int *, int32_t *, int *);
+              int32_t *, int *, int32_t *, float *, int *, int32_t *, float *, int *);
 void c_scan(const float *, const float *, const int32_t *, int, float, float, int32_t, int32_t, int32_t,
-            int32_t *, int *, int32_t *, float *, int *, int32_t *, int *);
+            int32_t *, int *, int32_t *, float *, int *, int32_t *, float *, int *);
 int sse_near4(const float *, const float *, const float *, int, float, float, float);
 int c_near4(const float *, const float *, const float *, int, float, float, float);
 int sse_within(const float *, const float *, int, float, float, float, int, int32_t *);
@@ -78,7 +78,7 @@ int main(void) {
         for (it = 0; it < 200; it++) {
             /* random columns (runs of any length, some with the events flag) */
             static int32_t cols[3 * 40], i1[NS + 8], i2[NS + 8], s1[NS], s2[NS], e1[NS + 8], e2[NS + 8];
-            static float d1[NS], d2[NS];
+            static float d1[NS], d2[NS], f1[NS + 8], f2[NS + 8];
             float x = u() * 100, y = u() * 100, lo = 30 + 20 * (u() + 1), hi = lo + 5 * (u() + 1), ev = 12;
             int32_t ilo = bits(lo * lo), ihi = bits(hi * hi), iev = bits(ev * ev);
             int nc = rand() % 40, n1 = 0, m1 = 0, q1 = 0, n2 = 0, m2 = 0, q2 = 0, total = 0;
@@ -88,10 +88,11 @@ int main(void) {
                 total += len;
             }
             if (total + 8 > NS) continue;
-            sse_scan(mx, my, cols, nc, x, y, ilo, ihi, iev, i1, &n1, s1, d1, &m1, e1, &q1);
-            c_scan(mx, my, cols, nc, x, y, ilo, ihi, iev, i2, &n2, s2, d2, &m2, e2, &q2);
+            sse_scan(mx, my, cols, nc, x, y, ilo, ihi, iev, i1, &n1, s1, d1, &m1, e1, f1, &q1);
+            c_scan(mx, my, cols, nc, x, y, ilo, ihi, iev, i2, &n2, s2, d2, &m2, e2, f2, &q2);
             if (n1 != n2 || m1 != m2 || q1 != q2 || memcmp(i1, i2, n1 * 4) || memcmp(s1, s2, m1 * 4) ||
-                memcmp(d1, d2, m1 * 4) || memcmp(e1, e2, q1 * 4)) bad++;
+                memcmp(d1, d2, m1 * 4) || memcmp(e1, e2, q1 * 4) ||
+                memcmp(f1, f2, q1 * 4)) bad++;
             for (k = 0; k < nc; k++) {
                 int p;
                 for (p = cols[3 * k]; p < cols[3 * k + 1]; p++) {

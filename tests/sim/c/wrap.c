@@ -17,8 +17,9 @@ void NAME(obj_rows)(float *o, const int32_t *cand, int n, const float *table, fl
 }
 void NAME(scan)(const float *mx, const float *my, const int32_t *cols, int ncols, float x, float y,
                 int32_t ilo, int32_t ihi, int32_t iev, int32_t *inner, int *ni, int32_t *shell,
-                float *shell_d, int *ns, int32_t *ev, int *ne) {
-    spd_scan_columns(mx, my, cols, ncols, x, y, ilo, ihi, iev, inner, ni, shell, shell_d, ns, ev, ne);
+                float *shell_d, int *ns, int32_t *ev, float *ev_d, int *ne) {
+    spd_scan_columns(mx, my, cols, ncols, x, y, ilo, ihi, iev, inner, ni, shell, shell_d, ns, ev, ev_d,
+                     ne);
 }
 int NAME(near4)(const float *bx, const float *by, const float *br, int k, float x0, float y0, float r0) {
     return spd_near4(bx, by, br, k, x0, y0, r0);
