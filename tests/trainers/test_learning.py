@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import time
 
-import pytest
 import torch
 from ppo_helpers import lane_env
 
@@ -53,7 +52,8 @@ def evaluate(trainer: PPOTrainer, episodes: int) -> dict[str, float]:
     return trainer.evaluate(episodes, 3000, deterministic=False, seed=EVAL_SEED)
 
 
-@pytest.mark.slow
+# About 65 s on the development machine: in the default suite, since it is issue #5's
+# acceptance test for learning.
 def test_waypoint_completion_rises_from_under_10_to_over_60_percent():
     t0 = time.perf_counter()
     trainer = make_trainer(num_worlds=32, updates=100, task=TASK, coeffs=TASK_COEFFS)
