@@ -180,6 +180,19 @@ def greedy_select(
     return out[:m]
 
 
+cdef inline i64 _lane_piece(const f64[::1] gcum, const i64[::1] offsets, i64 ln, double g) noexcept nogil:
+    """Centreline piece of lane `ln` holding flat arc length g: the largest lo with
+    gcum[lo] <= g, within [offsets[ln], offsets[ln + 1] - 2] (binary search)."""
+    cdef i64 lo = offsets[ln], hi = offsets[ln + 1] - 2, mid
+    while lo < hi:
+        mid = (lo + hi + 1) >> 1
+        if gcum[mid] <= g:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
 def lane_points(
     const f64[::1] gcum, const f64[::1] px, const f64[::1] py, const f64[::1] heading,
     const f64[::1] base, const f64[::1] length, const i64[::1] offsets,
@@ -196,7 +209,7 @@ def lane_points(
         out_xy: (n, 2) output [m]; out_heading: (n,) output [rad].
     """
     cdef Py_ssize_t q, n = lane.shape[0]
-    cdef i64 lo, hi, mid, ln
+    cdef i64 lo, ln
     cdef double g, ss, f
     with nogil:
         for q in range(n):
@@ -207,15 +220,7 @@ def lane_points(
             if ss > length[ln]:
                 ss = length[ln]
             g = base[ln] + ss
-            lo = offsets[ln]
-            hi = offsets[ln + 1] - 2
-            # largest lo with gcum[lo] <= g, within [offsets[ln], offsets[ln + 1] - 2]
-            while lo < hi:
-                mid = (lo + hi + 1) >> 1
-                if gcum[mid] <= g:
-                    lo = mid
-                else:
-                    hi = mid - 1
+            lo = _lane_piece(gcum, offsets, ln, g)
             f = (g - gcum[lo]) / (gcum[lo + 1] - gcum[lo])
             out_xy[q, 0] = px[lo] + f * (px[lo + 1] - px[lo])
             out_xy[q, 1] = py[lo] + f * (py[lo + 1] - py[lo])
@@ -310,14 +315,7 @@ cdef Py_ssize_t _chunk_poses(
         s = chunk_s0[ch] + u[q, 1] * (chunk_s1[ch] - chunk_s0[ch])
         ln = chunk_lane[ch]
         g = base[ln] + s
-        lo = offsets[ln]
-        hi = offsets[ln + 1] - 2
-        while lo < hi:
-            md = (lo + hi + 1) >> 1
-            if gcum[md] <= g:
-                lo = md
-            else:
-                hi = md - 1
+        lo = _lane_piece(gcum, offsets, ln, g)
         f = (g - gcum[lo]) / (gcum[lo + 1] - gcum[lo])
         x = px[lo] + f * (px[lo + 1] - px[lo])
         y = py[lo] + f * (py[lo + 1] - py[lo])
