@@ -256,18 +256,25 @@ def sample_chunk_poses(
                         ids_arr, cdf_arr, out_chunk, out_s, out_xy, out_heading)
 
 
+cdef inline bint _box_cells(const f64[::1] cell_origin, double cell, Py_ssize_t nx, Py_ssize_t ny,
+                            const f64[::1] box, Py_ssize_t* r) noexcept nogil:
+    """Grid cells that meet `box`: r = [ix0, iy0, ix1, iy1] (inclusive); False when none."""
+    r[0] = max(0, <Py_ssize_t>((box[0] - cell_origin[0]) // cell))
+    r[1] = max(0, <Py_ssize_t>((box[1] - cell_origin[1]) // cell))
+    r[2] = min(nx - 1, <Py_ssize_t>((box[2] - cell_origin[0]) // cell))
+    r[3] = min(ny - 1, <Py_ssize_t>((box[3] - cell_origin[1]) // cell))
+    return r[2] >= r[0] and r[3] >= r[1]
+
+
 cdef Py_ssize_t _box_count(const f64[::1] cell_origin, double cell, Py_ssize_t nx, Py_ssize_t ny,
                            const i64[::1] cell_offsets, const f64[::1] box) noexcept:
     """Number of items in the cells that meet `box` (an upper bound of the chunks inside)."""
-    cdef Py_ssize_t ix0, ix1, iy0, iy1, i, k = 0
-    ix0 = max(0, <Py_ssize_t>((box[0] - cell_origin[0]) // cell))
-    iy0 = max(0, <Py_ssize_t>((box[1] - cell_origin[1]) // cell))
-    ix1 = min(nx - 1, <Py_ssize_t>((box[2] - cell_origin[0]) // cell))
-    iy1 = min(ny - 1, <Py_ssize_t>((box[3] - cell_origin[1]) // cell))
-    if ix1 < ix0 or iy1 < iy0:
+    cdef Py_ssize_t r[4]
+    cdef Py_ssize_t i, k = 0
+    if not _box_cells(cell_origin, cell, nx, ny, box, r):
         return 0
-    for i in range(ix0, ix1 + 1):
-        k += cell_offsets[i * ny + iy1 + 1] - cell_offsets[i * ny + iy0]
+    for i in range(r[0], r[2] + 1):
+        k += cell_offsets[i * ny + r[3] + 1] - cell_offsets[i * ny + r[1]]
     return k
 
 
@@ -282,17 +289,14 @@ cdef Py_ssize_t _chunk_poses(
     i64[::1] out_chunk, f64[::1] out_s, f64[:, ::1] out_xy, f64[::1] out_heading,
 ) noexcept nogil:
     """The body of `sample_chunk_poses` (ids, cdf: scratch of `_box_count` entries)."""
-    cdef Py_ssize_t ix0, ix1, iy0, iy1, i, c, q, n_ids = 0, m = 0, n = u.shape[0]
+    cdef Py_ssize_t r[4]
+    cdef Py_ssize_t i, c, q, n_ids = 0, m = 0, n = u.shape[0]
     cdef i64 lo, hi, md, ln, ch
     cdef double total = 0.0, g, target, f, x, y, s
-    ix0 = max(0, <Py_ssize_t>((box[0] - cell_origin[0]) // cell))
-    iy0 = max(0, <Py_ssize_t>((box[1] - cell_origin[1]) // cell))
-    ix1 = min(nx - 1, <Py_ssize_t>((box[2] - cell_origin[0]) // cell))
-    iy1 = min(ny - 1, <Py_ssize_t>((box[3] - cell_origin[1]) // cell))
-    if ix1 < ix0 or iy1 < iy0:
+    if not _box_cells(cell_origin, cell, nx, ny, box, r):
         return 0
-    for i in range(ix0, ix1 + 1):
-        for c in range(cell_offsets[i * ny + iy0], cell_offsets[i * ny + iy1 + 1]):
+    for i in range(r[0], r[2] + 1):
+        for c in range(cell_offsets[i * ny + r[1]], cell_offsets[i * ny + r[3] + 1]):
             ch = cell_items[c]
             if box[0] <= mid[ch, 0] <= box[2] and box[1] <= mid[ch, 1] <= box[3]:
                 ids[n_ids] = ch
@@ -557,16 +561,13 @@ cdef class CrossingKernel:
     cdef Py_ssize_t query(self, const f64[::1] box, i64[::1] out) noexcept:
         """`CellIndex.query_box`: the sites whose midpoint lies in box, in cell order, into out
         (room for `_box_count` entries); returns their number."""
-        cdef Py_ssize_t ix0, ix1, iy0, iy1, i, c, m = 0
+        cdef Py_ssize_t r[4]
+        cdef Py_ssize_t i, c, m = 0
         cdef i64 p
-        ix0 = max(0, <Py_ssize_t>((box[0] - self.cell_origin[0]) // self.cell))
-        iy0 = max(0, <Py_ssize_t>((box[1] - self.cell_origin[1]) // self.cell))
-        ix1 = min(self.nx - 1, <Py_ssize_t>((box[2] - self.cell_origin[0]) // self.cell))
-        iy1 = min(self.ny - 1, <Py_ssize_t>((box[3] - self.cell_origin[1]) // self.cell))
-        if ix1 < ix0 or iy1 < iy0:
+        if not _box_cells(self.cell_origin, self.cell, self.nx, self.ny, box, r):
             return 0
-        for i in range(ix0, ix1 + 1):
-            for c in range(self.cell_offsets[i * self.ny + iy0], self.cell_offsets[i * self.ny + iy1 + 1]):
+        for i in range(r[0], r[2] + 1):
+            for c in range(self.cell_offsets[i * self.ny + r[1]], self.cell_offsets[i * self.ny + r[3] + 1]):
                 p = self.cell_items[c]
                 if (self.mid[p, 0] >= box[0] and self.mid[p, 0] <= box[2] and self.mid[p, 1] >= box[1]
                         and self.mid[p, 1] <= box[3]):
