@@ -97,6 +97,12 @@ NO_KERNEL_EFFECT = {
 KEY_SETTINGS = {
     # with every light off (all_off_prob = 0.5 per world) no initial state is drawn
     "spawner.lights.state_probs": {"spawner.lights.all_off_prob": 0.0},
+    # the spawner draws candidates one at a time: the budget binds only in worlds that cannot
+    # be filled (32 agents 40 m apart do not fit in a 200 m region)
+    "spawner.candidates_per_agent": {"spawner.min_agent_distance": 40.0},
+    # the first round's draws are one block: it shifts later draws only where the agents fill
+    # before the block is used up (5 m apart: within about 40 candidates)
+    "spawner.first_round_candidates": {"spawner.min_agent_distance": 5.0},
 }
 
 # Perturbations for values the generic rule (bool: flip; number: x0.5 or x2; list of numbers:

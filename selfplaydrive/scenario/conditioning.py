@@ -110,6 +110,7 @@ class ConditioningSampler:
             )
         self.eval_waypoint_radius = float(eval_waypoint_radius)
         self.eval_center_bias = float(eval_center_bias)
+        self._lo, self._hi = self._lo_hi()  # the ranges are fixed at construction
 
     def eval_vector(self) -> np.ndarray:
         """(len(COEFF_NAMES),) float32: the fixed evaluation coefficients (paper section 5)."""
@@ -140,9 +141,8 @@ class ConditioningSampler:
         # one (n, 10) draw: one column per coefficient plus the two mode choices, in this order;
         # coefficient k of an agent is lo_k + (hi_k - lo_k) u_k with its (bimodal) range
         u = rng.random((n, len(COEFF_NAMES) + 2))
-        lo, hi = self._lo_hi()
         return bimodal_uniform(
-            u, lo, hi,
+            u, self._lo, self._hi,
             COEFF_NAMES.index("center"), self.center_low[0], self.center_low[1], self.center_low_prob,
             COEFF_NAMES.index("align"), self.align_low[0], self.align_low[1], self.align_low_prob,
         )  # fmt: skip
@@ -188,10 +188,10 @@ class HiddenParamSampler:
         self.steer_gain = _check_range("steer_gain", steer_gain)
         if self.friction[0] <= 0:
             raise ConfigError(f"friction must be positive, got range {self.friction}")
+        ranges = {"friction": self.friction, "accel_gain": self.accel_gain, "steer_gain": self.steer_gain}
+        self._lo = np.array([ranges[k][0] for k in HIDDEN_PARAMS])  # fixed at construction
+        self._span = np.array([ranges[k][1] for k in HIDDEN_PARAMS]) - self._lo
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """(n, len(HIDDEN_PARAMS)) float32 friction, accel gain, steer gain."""
-        ranges = {"friction": self.friction, "accel_gain": self.accel_gain, "steer_gain": self.steer_gain}
-        lo = np.array([ranges[k][0] for k in HIDDEN_PARAMS])
-        hi = np.array([ranges[k][1] for k in HIDDEN_PARAMS])
-        return (lo + (hi - lo) * rng.random((n, len(HIDDEN_PARAMS)))).astype(np.float32)
+        return (self._lo + self._span * rng.random((n, len(HIDDEN_PARAMS)))).astype(np.float32)

@@ -258,11 +258,17 @@ class MapIndex:
         )
 
     @cached_property
+    def num_signal_groups(self) -> int:
+        """`RoadMap.num_signal_groups` of the map (computed once; a reset needs it twice)."""
+        return self.road_map.num_signal_groups
+
+    @cached_property
     def kernels(self) -> SpawnKernels:
         """The index's arrays bound once to the Cython kernels of a world reset."""
         from selfplaydrive._sim.spawn import ChunkKernel, RouteKernel
 
-        routes = RouteKernel(self.routes)
+        lanes = self.road_map.lanes
+        routes = RouteKernel(self.routes, lanes.width, lanes.speed_limit)
         return SpawnKernels(routes, ChunkKernel(self.spawn, routes), ChunkKernel(self.roadside, routes))
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import pedestrian_paths, pedestrian_sites
+from selfplaydrive._sim.spawn import pedestrian_batch
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.index import Crossings
 
@@ -111,34 +111,16 @@ class PedestrianSampler:
         want = min(int(rng.integers(self.count[0], self.count[1] + 1)), slots)
         if want == 0:
             return out
-        n_cw, n_other, cw, other = pedestrian_sites(
-            crosswalks.kernel, crossings.kernel, np.ascontiguousarray(box, dtype=np.float64)
-        )
-        if n_cw + n_other == 0:
-            return out
-        # one draw per pedestrian: pool, site, sideways shift, direction, kerb side, approach,
-        # speed, start time, size
-        u = rng.random((want, 9))
-        share = self.crosswalk_share if n_other else 1.0
-        # site choice, paths (`_paths`) and the clearance tests (`_clear_of`,
-        # `_path_clear_of`) in one kernel call
-        path = np.empty((want, PATH_POINTS, 2))
-        ok = np.empty(want, dtype=bool)
         still = np.zeros(len(vehicle_xy), dtype=bool) if stationary is None else stationary
-        pedestrian_paths(
-            crosswalks.kernel, crossings.kernel, cw, other, u, share, self.sidewalk_margin,
-            self.max_approach, np.ascontiguousarray(vehicle_xy, dtype=np.float64).reshape(-1, 2),
-            np.ascontiguousarray(vehicle_radius + self.vehicle_clearance, dtype=np.float64),
-            np.ascontiguousarray(still, dtype=bool), path, ok,
+        # sites in the box, then (when there are any) one (want, 9) draw: pool, site, sideways
+        # shift, direction, kerb side, approach, speed, start time, size; paths, clearance
+        # tests and the kept pedestrians' slots in one kernel call
+        pedestrian_batch(
+            self, crosswalks.kernel, crossings.kernel, rng, np.ascontiguousarray(box, dtype=np.float64),
+            want, np.ascontiguousarray(vehicle_xy, dtype=np.float64).reshape(-1, 2),
+            np.ascontiguousarray(vehicle_radius, dtype=np.float64),
+            np.ascontiguousarray(still, dtype=bool), out,
         )  # fmt: skip
-        n = int(ok.sum())
-        u = u[ok]
-        out.valid[:n] = True
-        out.path[:n] = path[ok]
-        out.num_points[:n] = PATH_POINTS
-        out.speed[:n] = self.speed[0] + (self.speed[1] - self.speed[0]) * u[:, 6]
-        out.start_time[:n] = self.start_time[0] + (self.start_time[1] - self.start_time[0]) * u[:, 7]
-        out.size[:n] = (self.size[0] + (self.size[1] - self.size[0]) * u[:, 8])[:, None]
         return out
 
 

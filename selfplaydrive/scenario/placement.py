@@ -5,6 +5,10 @@ probability proportional to its length, then a uniform arc length inside it). Se
 greedy pass over a random candidate order: a candidate is accepted when it keeps the required
 distance to everything accepted before it. The pass is bounded by the number of candidates
 drawn, so infeasible settings end with fewer vehicles instead of looping.
+
+`PaperSpawner` runs these rules candidate by candidate inside one kernel call
+(`_sim.spawn.Placer`, on the same `ChunkKernel.pose`); `sample_on_chunks` and
+`greedy_separated` are the batch forms, for other placements and the tests.
 """
 
 from __future__ import annotations

@@ -10,17 +10,20 @@ the same seed gives the same `Scenario`):
    are aligned: on a vehicle lane outside junctions, heading = lane direction + U(-h, h),
    lateral shift U(-l, l) (kept inside the lane), speed U(initial_speed) capped by the lane's
    speed limit. Any two agents are at least `min_agent_distance` (15 m) apart (box centres).
-   Candidates are accepted greedily in random order; their number is bounded (a first round of
-   `first_round_candidates` per wanted agent, a second up to `candidates_per_agent` in all only
-   when the first falls short), so infeasible settings never hang: the world gets fewer agents
-   and a `UserWarning` names the shortfall (once per spawner and map; every shortfall is
-   counted in `PaperSpawner.shortfalls` and `missing_agents`). Parked slots that find no
-   roadside become aligned agents; slots are shuffled so parked agents are spread over them.
+   Candidates are drawn one at a time and accepted greedily (`_sim.spawn.Placer.agents`); their
+   number is bounded (`candidates_per_agent` per wanted agent; the aligned agents' first
+   `first_round_candidates` per agent are drawn in one block), so infeasible settings never
+   hang: the world gets fewer agents and a `UserWarning` names the shortfall (once per spawner
+   and map; every shortfall is counted in `PaperSpawner.shortfalls` and `missing_agents`).
+   Parked slots that find no roadside become aligned agents; slots are shuffled so parked
+   agents are spread over them.
 3. Waypoints: a random legal route from each agent's lane (`maps.routing.sample_routes`) and up
    to `max_waypoints` waypoints on average `waypoint_spacing` s apart at the speed limit.
 4. Static vehicles: U{static_count} parked vehicles at the roadside, not overlapping agents
-   or each other (bounding circles + `static_gap`), each leaving at least
-   `min_free_lane_width` of its lane free.
+   or each other (bounding circles + `static_gap`), out of the lane space right ahead of every
+   agent (its box grown by `static_gap`, stretched forward by `STATIC_CLEAR_AHEAD` = 5 m plus
+   the distance it covers in `STATIC_HEADWAY` = 1 s), each leaving at least
+   `min_free_lane_width` of its lane free (`_sim.spawn.Placer.statics`).
 5. Pedestrians crossing at crosswalks and elsewhere (`PedestrianSampler`).
 6. Traffic lights (`LightSampler`), episode length from `episode_lengths`, per-agent reward
    coefficients (`ConditioningSampler`) and hidden dynamics parameters (`HiddenParamSampler`).
@@ -29,38 +32,40 @@ the same seed gives the same `Scenario`):
 from __future__ import annotations
 
 import warnings
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import aligned_candidates, roadside_poses
+from selfplaydrive._sim.spawn import Placer
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
-from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH, waypoint_times
+from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH
 from selfplaydrive.scenario.conditioning import ConditioningSampler, HiddenParamSampler
 from selfplaydrive.scenario.index import MapIndex, map_index
 from selfplaydrive.scenario.lights import LightSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS, PedestrianSampler
-from selfplaydrive.scenario.placement import Poses, sample_on_chunks, sample_region
-from selfplaydrive.scenario.placement import greedy_separated as _greedy
+from selfplaydrive.scenario.placement import sample_region
 from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
 # pieces per route at most (the default of `maps.routing.sample_routes`)
 MAX_ROUTE_PIECES = 128
-# columns of the spawner's (n, 10) agent rows
+# columns of the placement kernel's agent rows (`_sim.spawn.Placer`, its NumPy reference)
 AGENT_COLUMNS = ("lane", "s", "x", "y", "heading", "speed", "length", "width", "parked", "on_lane")
-
-
-def _half_diag(length: np.ndarray, width: np.ndarray) -> np.ndarray:
-    return 0.5 * np.hypot(length, width)
+# A static vehicle keeps out of the lane space ahead of each agent: STATIC_CLEAR_AHEAD m (one
+# car length) plus the distance the agent covers in STATIC_HEADWAY s at its initial speed, so
+# none stands right in front of an agent at the start
+STATIC_CLEAR_AHEAD = 5.0  # [m]
+STATIC_HEADWAY = 1.0  # [s]
 
 
 class PaperSpawner:
     """Spawner of paper section 2.2 (see the module docstring for the steps).
 
     Slot sizes are constructor arguments (the env's fixed buffer sizes); a scenario fills up to
-    them and marks the rest invalid.
+    them and marks the rest invalid. The placement settings and size samplers are bound to the
+    placement kernel at construction: change them by building a new spawner.
 
     Args:
         num_agents: A, agent slots; the spawner tries to fill all of them (32 in the paper).
@@ -206,10 +211,23 @@ class PaperSpawner:
         # warns, every one is counted here
         self.shortfalls: dict[str, int] = {}
         self.missing_agents: dict[str, int] = {}
+        self._last_index: tuple[weakref.ref, MapIndex] | None = None  # prepare's last map
+        # the settings above bound once for the placement kernel
+        self._placer = Placer(
+            self.sizes, self.static_sizes, self.min_agent_distance, self.first_round_candidates,
+            self.candidates_per_agent, self.static_candidates_per_vehicle, self.lateral_noise,
+            self.heading_noise, self.initial_speed[0], self.initial_speed[1], self.curb_gap,
+            self.max_shoulder, self.static_gap, self.min_free_lane_width, STATIC_CLEAR_AHEAD, STATIC_HEADWAY,
+        )  # fmt: skip
 
     def prepare(self, road_map: RoadMap) -> MapIndex:
         """Build (or fetch from the cache) the per-map tables; call once per map up front."""
-        return map_index(road_map, **self.index_args)
+        last = self._last_index
+        if last is not None and last[0]() is road_map:
+            return last[1]
+        index = map_index(road_map, **self.index_args)
+        self._last_index = (weakref.ref(road_map), index)
+        return index
 
     def sample(self, road_map: RoadMap, rng: np.random.Generator, map_index: int = 0) -> Scenario:
         """Sample the initial state of one world.
@@ -228,43 +246,37 @@ class PaperSpawner:
         """
         index = self.prepare(road_map)
         box = sample_region(index, rng)
-        sc = _empty_scenario(self, map_index, box, road_map.num_signal_groups)
-        agents = self._agents(index, box, rng)
-        n = len(agents)
-        self._write_agents(sc, agents)
-        self._waypoints(sc, index, agents[:, 0].astype(np.int64), agents[:, 1], rng)
-        veh_xy, veh_r = agents[:, 2:4], _half_diag(agents[:, 6], agents[:, 7])
-        self._statics(sc, index, box, rng, veh_xy, veh_r)
-        m = int(sc.static_valid.sum())
-        all_xy = np.concatenate([veh_xy, sc.static_xy[:m].astype(np.float64)])
-        all_r = np.concatenate([veh_r, _half_diag(sc.static_length[:m], sc.static_width[:m])])
-        still = np.concatenate([agents[:, 8] != 0, np.ones(m, dtype=bool)])
+        groups = index.num_signal_groups
+        sc = _empty_scenario(self, map_index, box, groups)
+        lane, s = self._agents(sc, index, box, rng)
+        n = len(lane)
+        self._waypoints(sc, index, lane, s, rng)
+        veh_xy, veh_r, still = self._statics(sc, index, box, rng, n)
         peds = self.pedestrians.sample(
-            rng, index.crossings, index.crosswalks, box, self.num_pedestrians, all_xy, all_r, still
+            rng, index.crossings, index.crosswalks, box, self.num_pedestrians, veh_xy, veh_r, still
         )
         sc.ped_valid, sc.ped_path, sc.ped_num_points = peds.valid, peds.path, peds.num_points
         sc.ped_speed, sc.ped_start_time, sc.ped_size = peds.speed, peds.start_time, peds.size
         sc.episode_length = self.episode_lengths[int(rng.integers(len(self.episode_lengths)))]
         sc.lights_enabled, sc.light_state, sc.light_time_left = self.lights.sample(
-            rng, road_map.num_signal_groups, sc.episode_length
+            rng, groups, sc.episode_length
         )
         sc.coeffs[:n] = self.conditioning.sample(rng, n)
         sc.hidden[:n] = self.hidden.sample(rng, n)
         return sc
 
     # -- agents ---------------------------------------------------------------------------------
-    # Agents and candidates are rows of one (n, 10) float64 array, columns `AGENT_COLUMNS`
-    # (lane index, arc length, centre x and y, heading, speed, length, width, parked, on lane),
-    # so a selection is one indexing operation.
 
-    def _agents(self, index: MapIndex, box: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Place parked then aligned agents, 15 m apart; returns (n, 10) rows in slot order."""
+    def _agents(
+        self, sc: Scenario, index: MapIndex, box: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Place parked then aligned agents, 15 m apart, into the agent slots of `sc`
+        (`_sim.spawn.Placer.agents`); returns each agent's route start: lane (n,) int64 and
+        arc length (n,) float64 [m], in slot order."""
         want = self.num_agents
         n_parked = int(rng.binomial(want, self.parked_share))
-        parked = self._parked(index, box, rng, n_parked)
-        aligned = self._spaced_aligned(index, box, rng, parked[:, 2:4], want - len(parked))
-        out = np.concatenate([parked, aligned])
-        got = len(out)
+        k = index.kernels
+        got, _, lane, s = self._placer.agents(k.spawn, k.roadside, rng, box, want, n_parked, sc)
         if got == 0:
             raise ConfigError(
                 f"PaperSpawner could not place a single agent on map {index.road_map.name!r} in region "
@@ -272,8 +284,7 @@ class PaperSpawner:
             )
         if got < want:
             self._shortfall(index.road_map.name, got, want)
-        order = rng.permutation(got)  # mix parked and aligned agents over the slots
-        return out[order]
+        return lane, s
 
     def _shortfall(self, name: str, got: int, want: int) -> None:
         """Count a world spawned with `got` < `want` agents; warn only on the first per map."""
@@ -291,100 +302,20 @@ class PaperSpawner:
                 stacklevel=4,
             )
 
-    def _spaced_aligned(
-        self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, fixed_xy: np.ndarray, need: int
-    ) -> np.ndarray:
-        """Aligned agents `min_agent_distance` apart from each other and from `fixed_xy` (final
-        positions, lateral shift included), drawn in two rounds: first `first_round_candidates`
-        per agent, then the rest of the `candidates_per_agent` budget only if that fell short."""
-        radius = self.min_agent_distance / 2
-        first = min(self.first_round_candidates, self.candidates_per_agent)
-        cand = self._aligned(index, sample_on_chunks(index, index.spawn, box, rng, need * first), rng)
-        fixed_r = np.full(len(fixed_xy), radius)
-        picked = _greedy(cand[:, 2:4], np.full(len(cand), radius), need, fixed_xy, fixed_r)
-        if len(picked) < need and self.candidates_per_agent > first:
-            more = sample_on_chunks(index, index.spawn, box, rng, need * (self.candidates_per_agent - first))
-            cand = np.concatenate([cand, self._aligned(index, more, rng)])
-            picked = _greedy(cand[:, 2:4], np.full(len(cand), radius), need, fixed_xy, fixed_r)
-        return cand[picked]
-
-    def _parked(self, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n: int) -> np.ndarray:
-        """Up to n parked agents at roadside spots, `min_agent_distance` apart (section 2.2)."""
-        cand = sample_on_chunks(index, index.roadside, box, rng, n * self.candidates_per_agent)
-        length, width, _ = self.sizes.sample(rng, len(cand.lane))
-        xy, off, _ = self._roadside(index, cand, width, 0.0)
-        k = _greedy(xy, np.full(len(xy), self.min_agent_distance / 2), n)
-        out = np.empty((len(k), len(AGENT_COLUMNS)))
-        out[:, 0] = cand.lane[k]
-        out[:, 1] = cand.s[k]
-        out[:, 2:4] = xy[k]
-        out[:, 4] = cand.heading[k]
-        out[:, 5] = 0.0
-        out[:, 6] = length[k]
-        out[:, 7] = width[k]
-        out[:, 8] = 1.0
-        out[:, 9] = off[k] <= index.road_map.lanes.width[cand.lane[k]].astype(np.float64) / 2
-        return out
-
-    def _roadside(
-        self, index: MapIndex, cand: Poses, width: np.ndarray, min_free: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Roadside poses of vehicles of `width` parked at the candidates (`roadside_offset`
-        then `offset_right`, kernel `_sim.spawn.roadside_poses`): centres (n, 2), lateral
-        offsets (n,) and whether each leaves `min_free` m of its lane free."""
-        n = len(cand.lane)
-        xy, off, fits = np.empty((n, 2)), np.empty(n), np.empty(n, dtype=bool)
-        roadside_poses(
-            cand.lane, cand.chunk, cand.xy, np.sin(cand.heading), np.cos(cand.heading), width,
-            index.road_map.lanes.width, index.roadside.edge, self.curb_gap, self.max_shoulder,
-            min_free, xy, off, fits,
-        )  # fmt: skip
-        return xy, off, fits
-
-    def _aligned(self, index: MapIndex, poses: Poses, rng: np.random.Generator) -> np.ndarray:
-        """Aligned-agent candidates at `poses`: sizes, lateral shift, heading noise, speed
-        (kernel `_sim.spawn.aligned_candidates`); (n, 10) rows."""
-        n = len(poses.lane)
-        length, width, _ = self.sizes.sample(rng, n)
-        u = rng.random((3, n))
-        lanes = index.road_map.lanes
-        out = np.empty((n, len(AGENT_COLUMNS)))
-        lo, hi = self.initial_speed
-        aligned_candidates(
-            poses.lane, poses.s, poses.xy, poses.heading, np.sin(poses.heading), np.cos(poses.heading),
-            length, width, u, lanes.width, lanes.speed_limit, self.lateral_noise, self.heading_noise,
-            lo, hi, out,
-        )  # fmt: skip
-        return out
-
-    @staticmethod
-    def _write_agents(sc: Scenario, a: np.ndarray) -> None:
-        n = len(a)
-        sc.agent_valid[:n] = True
-        sc.agent_xy[:n] = a[:, 2:4]
-        sc.agent_heading[:n] = a[:, 4]
-        sc.agent_speed[:n] = a[:, 5]
-        sc.agent_length[:n] = a[:, 6]
-        sc.agent_width[:n] = a[:, 7]
-        sc.agent_parked[:n] = a[:, 8] != 0
-        sc.agent_lane[:n] = np.where(a[:, 9] != 0, a[:, 0], -1)
-
     def _waypoints(
         self, sc: Scenario, index: MapIndex, lane: np.ndarray, s: np.ndarray, rng: np.random.Generator
     ) -> None:
         """Random legal routes from (lane, s) and up to K waypoints along them (section 2.2):
-        `maps.routing.sample_routes` + `batch_waypoints` (same draws, same results) fused in
-        one kernel call (`_sim.spawn.RouteKernel.waypoints`)."""
-        n = len(lane)
-        times = waypoint_times(
-            rng, n, self.max_waypoints, self.waypoint_spacing, self.waypoint_spacing_jitter
-        )
-        key = int(rng.integers(0, 2**63))  # the key sample_routes draws
-        index.kernels.routes.waypoints(
-            np.ascontiguousarray(lane, dtype=np.int64),
-            np.ascontiguousarray(s, dtype=np.float64),
-            times,
-            key,
+        `maps.routing.waypoint_times`, the key `sample_routes` draws, `sample_routes` and
+        `batch_waypoints` (same draws, same results) fused in one kernel call
+        (`_sim.spawn.RouteKernel.draw_waypoints`)."""
+        index.kernels.routes.draw_waypoints(
+            rng,
+            lane,
+            s,
+            self.max_waypoints,
+            self.waypoint_spacing,
+            self.waypoint_spacing_jitter,
             self.lane_change_prob,
             MIN_CHANGE_LENGTH,
             MAX_ROUTE_PIECES,
@@ -395,33 +326,16 @@ class PaperSpawner:
     # -- static vehicles ------------------------------------------------------------------------
 
     def _statics(
-        self,
-        sc: Scenario,
-        index: MapIndex,
-        box: np.ndarray,
-        rng: np.random.Generator,
-        veh_xy: np.ndarray,
-        veh_r: np.ndarray,
-    ) -> None:
-        """Up to `static_count` stationary vehicles at the roadside, clear of every agent."""
+        self, sc: Scenario, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n_agents: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Up to `static_count` stationary vehicles at the roadside, clear of every agent
+        (`_sim.spawn.Placer.statics`). Returns every vehicle of the world (agents, then static
+        vehicles): centres (n, 2) [m], bounding-circle radii (n,) [m] and whether each stands
+        still (parked agent or static vehicle), for the pedestrians."""
         lo, hi = self.static_count
         want = min(int(rng.integers(lo, hi + 1)), self.num_static)
-        if want == 0:
-            return
-        cand = sample_on_chunks(index, index.roadside, box, rng, want * self.static_candidates_per_vehicle)
-        length, width, _ = self.static_sizes.sample(rng, len(cand.lane))
-        # section 2.2: stationary vehicles must not block a lane completely
-        xy, _, fits = self._roadside(index, cand, width, self.min_free_lane_width)
-        keep = np.flatnonzero(fits)
-        xy = xy[keep]
-        r = _half_diag(length[keep], width[keep])
-        k = _greedy(xy, r, want, veh_xy, veh_r, gap=self.static_gap)
-        m = len(k)
-        sc.static_valid[:m] = True
-        sc.static_xy[:m] = xy[k]
-        sc.static_heading[:m] = cand.heading[keep][k]
-        sc.static_length[:m] = length[keep][k]
-        sc.static_width[:m] = width[keep][k]
+        _, xy, radius, still = self._placer.statics(index.kernels.roadside, rng, box, want, n_agents, sc)
+        return xy, radius, still
 
 
 def _check_int(name: str, value: int, minimum: int) -> None:

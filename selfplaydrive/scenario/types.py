@@ -113,6 +113,12 @@ class Scenario:
         """A scenario with every slot invalid and zero-filled (the padding convention), lights
         off; spawners and scenario suites fill in the slots they use."""
         a, k, s, p, f4 = num_agents, max_waypoints, num_static, num_pedestrians, np.float32
+        # np.empty + fill: np.full costs several times more for these small arrays (a reset
+        # builds one Scenario)
+        agent_lane = np.empty(a, np.int32)
+        agent_lane.fill(-1)
+        light_time_left = np.empty(num_groups, f4)
+        light_time_left.fill(episode_length)
         return cls(
             map_index=int(map_index),
             region=np.zeros(4, f4) if region is None else np.asarray(region, f4),
@@ -123,7 +129,7 @@ class Scenario:
             agent_length=np.zeros(a, f4),
             agent_width=np.zeros(a, f4),
             agent_parked=np.zeros(a, bool),
-            agent_lane=np.full(a, -1, np.int32),
+            agent_lane=agent_lane,
             waypoints=np.zeros((a, k, 2), f4),
             num_waypoints=np.zeros(a, np.int32),
             coeffs=np.zeros((a, len(COEFF_NAMES)), f4),
@@ -141,6 +147,6 @@ class Scenario:
             ped_size=np.zeros((p, 2), f4),
             lights_enabled=False,
             light_state=np.zeros(num_groups, np.int8),
-            light_time_left=np.full(num_groups, float(episode_length), f4),
+            light_time_left=light_time_left,
             episode_length=float(episode_length),
         )

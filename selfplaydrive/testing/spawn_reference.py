@@ -7,11 +7,17 @@ give identical results for the same inputs and random draws.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH, RouteBatch, RouteTables, _empty_batch
 from selfplaydrive.scenario.index import Chunks, Crossings, MapIndex
+from selfplaydrive.scenario.pedestrians import PedestrianBatch, PedestrianSampler
 from selfplaydrive.scenario.placement import Poses
+
+if TYPE_CHECKING:
+    from selfplaydrive.scenario.spawner import PaperSpawner
 
 
 def lane_points_reference(t: RouteTables, lane: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +227,8 @@ def pedestrian_paths_reference(
     """NumPy reference of the pedestrian kernel `_sim.spawn.pedestrian_paths` (with the site
     query `pedestrian_sites`): for draws u (n, 9), the (n, 3, 2) paths (approach point,
     crossing start, crossing end) and (n,) ok: the first point keeps clear_r from every
-    vehicle centre and no leg passes within clear_r of a vehicle with `still` set."""
+    vehicle centre (squared distances compared) and no leg passes within clear_r of a vehicle
+    with `still` set."""
     cw, other = crosswalks.cells.query_box(box), crossings.cells.query_box(box)
     n_cw, n_other = len(cw), len(other)
     use_cw = (u[:, 0] < share) if n_cw else np.zeros(len(u), dtype=bool)
@@ -247,8 +254,9 @@ def pedestrian_paths_reference(
     ok = np.ones(len(u), dtype=bool)
     if len(vehicle_xy):
         p = path[:, 0]
-        dist = np.hypot(p[:, None, 0] - vehicle_xy[None, :, 0], p[:, None, 1] - vehicle_xy[None, :, 1])
-        ok &= np.all(dist >= clear_r[None, :], axis=1)
+        dx = p[:, None, 0] - vehicle_xy[None, :, 0]
+        dy = p[:, None, 1] - vehicle_xy[None, :, 1]
+        ok &= np.all(dx * dx + dy * dy >= (clear_r * clear_r)[None, :], axis=1)
     if np.any(still):
         xy, r = vehicle_xy[still], clear_r[still]
         a = path[:, :-1, None, :]  # (n, T-1, 1, 2)
@@ -353,3 +361,243 @@ def bimodal_uniform_reference(
     lo[low_c, c], hi[low_c, c] = c_range
     lo[low_a, a], hi[low_a, a] = a_range
     return (lo + (hi - lo) * u[:, :k]).astype(np.float32)
+
+
+def pedestrian_batch_reference(
+    sampler: PedestrianSampler,
+    rng: np.random.Generator,
+    crossings: Crossings,
+    crosswalks: Crossings,
+    box: np.ndarray,
+    slots: int,
+    vehicle_xy: np.ndarray,
+    vehicle_radius: np.ndarray,
+    stationary: np.ndarray,
+) -> PedestrianBatch:
+    """NumPy reference of `PedestrianSampler.sample` (kernel `_sim.spawn.pedestrian_batch`):
+    the count draw, the sites, one (want, 9) draw when there are any, paths and clearance
+    tests (`pedestrian_paths_reference`), the kept pedestrians in order."""
+    from selfplaydrive.scenario.pedestrians import PATH_POINTS
+
+    out = PedestrianBatch(
+        valid=np.zeros(slots, dtype=bool),
+        path=np.zeros((slots, PATH_POINTS, 2), dtype=np.float32),
+        num_points=np.zeros(slots, dtype=np.int32),
+        speed=np.zeros(slots, dtype=np.float32),
+        start_time=np.zeros(slots, dtype=np.float32),
+        size=np.zeros((slots, 2), dtype=np.float32),
+    )
+    want = min(int(rng.integers(sampler.count[0], sampler.count[1] + 1)), slots)
+    n_cw, n_other = len(crosswalks.cells.query_box(box)), len(crossings.cells.query_box(box))
+    if want == 0 or n_cw + n_other == 0:
+        return out
+    u = rng.random((want, 9))
+    share = sampler.crosswalk_share if n_other else 1.0
+    path, ok = pedestrian_paths_reference(
+        crosswalks, crossings, box, u, share, sampler.sidewalk_margin, sampler.max_approach,
+        vehicle_xy, vehicle_radius + sampler.vehicle_clearance, stationary,
+    )  # fmt: skip
+    n = int(ok.sum())
+    u = u[ok]
+    out.valid[:n] = True
+    out.path[:n] = path[ok]
+    out.num_points[:n] = PATH_POINTS
+    out.speed[:n] = sampler.speed[0] + (sampler.speed[1] - sampler.speed[0]) * u[:, 6]
+    out.start_time[:n] = sampler.start_time[0] + (sampler.start_time[1] - sampler.start_time[0]) * u[:, 7]
+    out.size[:n] = (sampler.size[0] + (sampler.size[1] - sampler.size[0]) * u[:, 8])[:, None]
+    return out
+
+
+def waypoint_draws_reference(
+    rng: np.random.Generator, a: int, k: int, spacing: float, jitter: float
+) -> tuple[np.ndarray, int]:
+    """The draws of `_sim.spawn.RouteKernel.draw_waypoints` made with NumPy's own calls:
+    (`maps.routing.waypoint_times(rng, a, k, spacing, jitter)`, `rng.integers(0, 2**63)`)."""
+    from selfplaydrive.maps.routing import waypoint_times
+
+    times = waypoint_times(rng, a, k, spacing, jitter)
+    return times, int(rng.integers(0, 2**63))
+
+
+# -- agent and static-vehicle placement (kernel `_sim.spawn.Placer`) -------------------------------
+
+
+def _gathered(chunks: Chunks, box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The chunks whose midpoint lies in `box` (cell order) and their cumulative lengths."""
+    ids = chunks.cells.query_box(box)
+    return ids, np.cumsum(chunks.s1[ids] - chunks.s0[ids])
+
+
+def _pose(index: MapIndex, chunks: Chunks, ids: np.ndarray, cdf: np.ndarray, box: np.ndarray, u: np.ndarray):
+    """(inside box, lane, s, xy (1, 2), heading (1,), chunk) of the pose of draws u[0:2]: the
+    chunk is picked with probability proportional to its length, the arc length inside it."""
+    pick = ids[min(int(np.searchsorted(cdf, u[0] * cdf[-1], side="right")), len(ids) - 1)]
+    s = chunks.s0[pick] + u[1] * (chunks.s1[pick] - chunks.s0[pick])
+    lane = int(chunks.lane[pick])
+    xy, heading = lane_points_reference(index.routes, np.array([lane]), np.array([s]))
+    inside = bool(box[0] <= xy[0, 0] <= box[2] and box[1] <= xy[0, 1] <= box[3])
+    return inside, lane, s, xy, heading, pick
+
+
+def _size(sampler, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(1,) length and width of one vehicle from the draws u[0:3]."""
+    length, width, _ = vehicle_sizes_reference(
+        u[:3, None], sampler._cdf, sampler.length, sampler.width, sampler.jitter, sampler.max_width
+    )
+    return length, width
+
+
+def _far(xy: np.ndarray, radius: np.ndarray, p: np.ndarray, r: float, gap: float) -> bool:
+    """Whether point p (2,) of radius r keeps radius + r + gap from every row of xy (k, 2)."""
+    if len(xy) == 0:
+        return True
+    dx = p[0] - xy[:, 0]
+    dy = p[1] - xy[:, 1]
+    lim = r + radius + gap
+    return bool(np.all(~(dx * dx + dy * dy < lim * lim)))
+
+
+def place_agents_reference(
+    spawner: PaperSpawner, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n_parked: int
+) -> tuple[np.ndarray, int]:
+    """NumPy reference of `_sim.spawn.Placer.agents` with `spawner`'s settings: the same draws
+    from `rng` in the same order, one candidate at a time.
+
+    Returns:
+        (n, 10) float64 agent rows (`scenario.spawner.AGENT_COLUMNS`) in slot order, and how
+        many of them are parked.
+    """
+    from selfplaydrive.scenario.spawner import AGENT_COLUMNS
+
+    lanes = index.road_map.lanes
+    want, per = spawner.num_agents, spawner.candidates_per_agent
+    half = np.full(want, spawner.min_agent_distance / 2)
+    rows = np.zeros((0, len(AGENT_COLUMNS)))
+    ids, cdf = _gathered(index.roadside, box)
+    for _ in range(n_parked * per if len(ids) and n_parked > 0 else 0):
+        u = rng.random(5)
+        inside, lane, s, xy, heading, chunk = _pose(index, index.roadside, ids, cdf, box, u)
+        if not inside:
+            continue
+        length, width = _size(spawner.sizes, u[2:])
+        pos, off, _ = roadside_poses_reference(
+            np.array([lane]), np.array([chunk]), xy, heading, width, lanes.width, index.roadside.edge,
+            spawner.curb_gap, spawner.max_shoulder, 0.0,
+        )  # fmt: skip
+        if not _far(rows[:, 2:4], half[: len(rows)], pos[0], half[0], 0.0):
+            continue
+        on_lane = off[0] <= lanes.width[lane].astype(np.float64) / 2
+        row = [lane, s, pos[0, 0], pos[0, 1], heading[0], 0.0, length[0], width[0], 1.0, float(on_lane)]
+        rows = np.vstack([rows, row])
+        if len(rows) >= n_parked:
+            break
+    parked = len(rows)
+    need = want - parked
+    ids, cdf = _gathered(index.spawn, box)
+    first = min(spawner.first_round_candidates, per)
+    block = rng.random((need * first, 8)) if len(ids) and need > 0 else np.zeros((0, 8))
+    for j in range(need * per if len(ids) and need > 0 else 0):
+        u = block[j] if j < len(block) else rng.random(8)
+        inside, lane, s, xy, heading, chunk = _pose(index, index.spawn, ids, cdf, box, u)
+        if not inside:
+            continue
+        length, width = _size(spawner.sizes, u[2:])
+        row = aligned_candidates_reference(
+            np.array([lane]), np.array([s]), xy, heading, length, width, u[5:8, None], lanes.width,
+            lanes.speed_limit, spawner.lateral_noise, spawner.heading_noise, spawner.initial_speed,
+        )  # fmt: skip
+        if not _far(rows[:, 2:4], half[: len(rows)], row[0, 2:4], half[0], 0.0):
+            continue
+        rows = np.vstack([rows, row])
+        if len(rows) >= want:
+            break
+    order = np.arange(len(rows))
+    for i in range(len(rows) - 1, 0, -1):  # Fisher-Yates, one draw per slot from the last down
+        j = min(int(rng.random() * (i + 1)), i)
+        order[i], order[j] = order[j], order[i]
+    return rows[order], parked
+
+
+def boxes_overlap_reference(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two rectangles overlap, by projecting their corners on the four edge normals.
+    a, b: (centre x, centre y, heading [rad], half length, half width)."""
+
+    def corners(r: np.ndarray) -> np.ndarray:
+        c, s = np.cos(r[2]), np.sin(r[2])
+        f, left = np.array([c, s]), np.array([-s, c])
+        signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], dtype=np.float64)
+        return r[:2] + signs[:, :1] * r[3] * f + signs[:, 1:] * r[4] * left
+
+    ca, cb = corners(a), corners(b)
+    for r in (a, b):
+        c, s = np.cos(r[2]), np.sin(r[2])
+        for axis in (np.array([c, s]), np.array([-s, c])):
+            pa, pb = ca @ axis, cb @ axis
+            if pa.max() < pb.min() or pb.max() < pa.min():
+                return False
+    return True
+
+
+def place_statics_reference(
+    spawner: PaperSpawner,
+    index: MapIndex,
+    box: np.ndarray,
+    rng: np.random.Generator,
+    want: int,
+    agents: dict[str, np.ndarray],
+    clear_ahead: float,
+    headway: float,
+) -> np.ndarray:
+    """NumPy reference of `_sim.spawn.Placer.statics` with `spawner`'s settings.
+
+    Args:
+        agents: The placed agents as stored in the scenario: "xy" (n, 2), "heading", "speed",
+            "length", "width" (n,) (float32 arrays).
+        clear_ahead, headway: The keep-clear zone ahead of each agent: its box grown by
+            `static_gap` and stretched forward by clear_ahead + speed * headway [m].
+
+    Returns:
+        (m, 5) float64 rows x, y, heading, length, width of the static vehicles in slot order.
+    """
+    lanes = index.road_map.lanes
+    gap = spawner.static_gap
+    a_xy = agents["xy"].astype(np.float64).reshape(-1, 2)
+    a_len, a_w = agents["length"].astype(np.float64), agents["width"].astype(np.float64)
+    a_h, a_v = agents["heading"].astype(np.float64), agents["speed"].astype(np.float64)
+    a_r = 0.5 * np.hypot(a_len, a_w)
+    ahead = clear_ahead + a_v * headway
+    zone = np.column_stack(
+        [
+            a_xy[:, 0] + 0.5 * ahead * np.cos(a_h),
+            a_xy[:, 1] + 0.5 * ahead * np.sin(a_h),
+            a_h,
+            0.5 * a_len + gap + 0.5 * ahead,
+            0.5 * a_w + gap,
+        ]
+    )
+    out = np.zeros((0, 5))
+    radius = np.zeros(0)
+    ids, cdf = _gathered(index.roadside, box)
+    for _ in range(want * spawner.static_candidates_per_vehicle if len(ids) and want > 0 else 0):
+        u = rng.random(5)
+        inside, lane, _, xy, heading, chunk = _pose(index, index.roadside, ids, cdf, box, u)
+        if not inside:
+            continue
+        length, width = _size(spawner.static_sizes, u[2:])
+        pos, _, fits = roadside_poses_reference(
+            np.array([lane]), np.array([chunk]), xy, heading, width, lanes.width, index.roadside.edge,
+            spawner.curb_gap, spawner.max_shoulder, spawner.min_free_lane_width,
+        )  # fmt: skip
+        if not fits[0]:
+            continue
+        r = 0.5 * np.hypot(length[0], width[0])
+        if not _far(a_xy, a_r, pos[0], r, gap) or not _far(out[:, :2], radius, pos[0], r, gap):
+            continue
+        box_s = np.array([pos[0, 0], pos[0, 1], heading[0], 0.5 * length[0], 0.5 * width[0]])
+        if any(boxes_overlap_reference(z, box_s) for z in zone):
+            continue
+        out = np.vstack([out, [pos[0, 0], pos[0, 1], heading[0], length[0], width[0]]])
+        radius = np.append(radius, r)
+        if len(out) >= want:
+            break
+    return out

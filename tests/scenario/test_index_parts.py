@@ -8,25 +8,32 @@ import numpy as np
 import pytest
 
 from selfplaydrive.errors import ConfigError
+from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH
 from selfplaydrive.scenario.index import CellIndex, MapIndex, map_index
 from selfplaydrive.scenario.lights import LightSampler
-from selfplaydrive.scenario.pedestrians import PedestrianSampler
+from selfplaydrive.scenario.pedestrians import PATH_POINTS, PedestrianSampler
 from selfplaydrive.scenario.placement import (
     greedy_separated,
     roadside_offset,
     sample_on_chunks,
     sample_region,
 )
-from selfplaydrive.scenario.spawner import PaperSpawner
+from selfplaydrive.scenario.spawner import STATIC_CLEAR_AHEAD, STATIC_HEADWAY, PaperSpawner
+from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import DEFAULT_CATEGORIES, VehicleSizeSampler
 from selfplaydrive.testing.spawn_reference import (
     aligned_candidates_reference,
     bimodal_uniform_reference,
+    boxes_overlap_reference,
     greedy_separated_reference,
+    pedestrian_batch_reference,
     pedestrian_paths_reference,
+    place_agents_reference,
+    place_statics_reference,
     roadside_poses_reference,
     sample_on_chunks_reference,
     vehicle_sizes_reference,
+    waypoint_draws_reference,
 )
 
 
@@ -317,3 +324,119 @@ def test_scenario_pedestrians_never_walk_through_parked_or_static(scenarios_smal
                 t = np.clip(((still_xy - a) @ d) / max(d @ d, 1e-12), 0, 1)
                 dist = np.hypot(*(still_xy - (a + t[:, None] * d)).T)
                 assert np.all(dist >= still_r + 1.0 - 1e-3)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {},
+        # many parked agents far apart: parked shortfalls and a second aligned round
+        {"parked_share": 0.6, "min_agent_distance": 30.0},
+        # a tiny candidate budget: shortfalls; every static slot wanted, little static gap
+        {"first_round_candidates": 1, "candidates_per_agent": 3, "static_count": (48, 48), "static_gap": 0.2},
+    ],
+)
+def test_placement_kernel_matches_reference(grid_map, kwargs):
+    """`Placer.agents` and `Placer.statics` equal their NumPy references bit for bit over random
+    regions: the same draws from the same generator (checked by the next draw of each), the same
+    candidates accepted, the same slots."""
+    sp = PaperSpawner(**kwargs)
+    idx = sp.prepare(grid_map)
+    k = idx.kernels
+    placed = parked_total = statics_total = short = 0
+    for seed in range(10):
+        box = sample_region(idx, np.random.default_rng(100 + seed))
+        n_parked = int(np.random.default_rng(seed).binomial(sp.num_agents, sp.parked_share))
+        sc = Scenario.empty(sp.num_agents, sp.max_waypoints, sp.num_static, 0, PATH_POINTS, 0)
+        rng_k, rng_r = np.random.default_rng(seed), np.random.default_rng(seed)
+        got, parked, lane, s = sp._placer.agents(k.spawn, k.roadside, rng_k, box, sp.num_agents, n_parked, sc)
+        rows, parked_ref = place_agents_reference(sp, idx, box, rng_r, n_parked)
+        assert (got, parked) == (len(rows), parked_ref)
+        np.testing.assert_array_equal(lane, rows[:, 0].astype(np.int64))
+        np.testing.assert_array_equal(s, rows[:, 1])
+        for name, col in (("xy", slice(2, 4)), ("heading", 4), ("speed", 5), ("length", 6), ("width", 7)):
+            np.testing.assert_array_equal(getattr(sc, f"agent_{name}")[:got], rows[:, col].astype(np.float32))
+        np.testing.assert_array_equal(sc.agent_parked[:got], rows[:, 8] != 0)
+        np.testing.assert_array_equal(sc.agent_lane[:got], np.where(rows[:, 9] != 0, rows[:, 0], -1))
+        assert not sc.agent_valid[got:].any() and sc.agent_valid[:got].all()
+        assert rng_k.random() == rng_r.random()
+        want = int(np.random.default_rng(seed).integers(sp.static_count[0], sp.static_count[1] + 1))
+        m, vxy, vr, still = sp._placer.statics(k.roadside, rng_k, box, want, got, sc)
+        agents = {f: getattr(sc, f"agent_{f}")[:got] for f in ("xy", "heading", "speed", "length", "width")}
+        ref = place_statics_reference(sp, idx, box, rng_r, want, agents, STATIC_CLEAR_AHEAD, STATIC_HEADWAY)
+        assert m == len(ref) and sc.static_valid[:m].all() and not sc.static_valid[m:].any()
+        for name, col in (("xy", slice(0, 2)), ("heading", 2), ("length", 3), ("width", 4)):
+            np.testing.assert_array_equal(getattr(sc, f"static_{name}")[:m], ref[:, col].astype(np.float32))
+        assert rng_k.random() == rng_r.random()
+        # every vehicle for the pedestrians: agents then statics, as stored
+        xy = np.concatenate([sc.agent_xy[:got], sc.static_xy[:m]]).astype(np.float64)
+        length = np.concatenate([sc.agent_length[:got], sc.static_length[:m]]).astype(np.float64)
+        width = np.concatenate([sc.agent_width[:got], sc.static_width[:m]]).astype(np.float64)
+        np.testing.assert_array_equal(vxy, xy)
+        np.testing.assert_array_equal(vr, 0.5 * np.hypot(length, width))
+        np.testing.assert_array_equal(still, np.concatenate([sc.agent_parked[:got], np.ones(m, dtype=bool)]))
+        placed += got
+        parked_total += parked
+        statics_total += m
+        short += got < sp.num_agents
+    assert placed > 0 and parked_total > 0 and statics_total > 0
+    if kwargs:
+        assert short > 0  # the shortfall paths ran
+
+
+def test_boxes_meet_kernel_matches_reference():
+    """The separating-axis test of the static placement agrees with the corner-projection
+    reference on random box pairs, overlapping and apart."""
+    from selfplaydrive._sim.spawn import boxes_meet
+
+    rng = np.random.default_rng(4)
+    hits = 0
+    for _ in range(3000):
+        a = np.array([*rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), *rng.uniform(0.3, 6.0, 2)])
+        b = np.array([*rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), *rng.uniform(0.3, 6.0, 2)])
+        got = boxes_meet(a[0], a[1], a[2], 2 * a[3], 2 * a[4], b[0], b[1], b[2], 2 * b[3], 2 * b[4])
+        assert got == boxes_overlap_reference(a, b)
+        hits += got
+    assert 300 < hits < 2700
+
+
+def test_waypoint_draws_match_numpy_calls(grid_map):
+    """`RouteKernel.draw_waypoints` draws what `waypoint_times` and `rng.integers(0, 2**63)`
+    draw (same values, same stream position), so its waypoints equal `waypoints` fed with
+    those."""
+    idx = map_index(grid_map)
+    lane = idx.spawn.lane[::7][:20].copy()
+    s = np.linspace(0.0, 3.0, len(lane))
+    for seed in range(5):
+        a, ca = np.zeros((len(lane), 8, 2), np.float32), np.zeros(len(lane), np.int32)
+        b, cb = np.zeros_like(a), np.zeros_like(ca)
+        rng_k, rng_r = np.random.default_rng(seed), np.random.default_rng(seed)
+        idx.kernels.routes.draw_waypoints(rng_k, lane, s, 8, 5.0, 0.5, 0.3, MIN_CHANGE_LENGTH, 128, a, ca)
+        times, key = waypoint_draws_reference(rng_r, len(lane), 8, 5.0, 0.5)
+        idx.kernels.routes.waypoints(lane, s, times, key, 0.3, MIN_CHANGE_LENGTH, 128, b, cb)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(ca, cb)
+        assert rng_k.random() == rng_r.random()
+        assert ca.min() >= 1
+
+
+def test_pedestrian_sampler_matches_reference(grid_map):
+    """`PedestrianSampler.sample` (kernel `pedestrian_batch`) equals the NumPy reference field by
+    field, with vehicles that block some pedestrians, and leaves the generator where it does."""
+    idx = map_index(grid_map)
+    sampler = PedestrianSampler(count=(2, 8))
+    rng = np.random.default_rng(12)
+    kept = 0
+    for seed in range(40):
+        box = np.array([-100.0, -100.0, 100.0, 100.0]) + rng.uniform(-60, 60, 2).repeat(2)
+        vxy = rng.uniform(-100, 100, (30, 2))
+        vr = rng.uniform(1.0, 6.0, 30)
+        still = rng.random(30) < 0.5
+        rng_k, rng_r = np.random.default_rng(seed), np.random.default_rng(seed)
+        a = sampler.sample(rng_k, idx.crossings, idx.crosswalks, box, 8, vxy, vr, still)
+        b = pedestrian_batch_reference(sampler, rng_r, idx.crossings, idx.crosswalks, box, 8, vxy, vr, still)
+        for f in ("valid", "path", "num_points", "speed", "start_time", "size"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+        assert rng_k.random() == rng_r.random()
+        kept += int(a.valid.sum())
+    assert 0 < kept < 40 * 8

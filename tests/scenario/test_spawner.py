@@ -14,8 +14,9 @@ from selfplaydrive.maps import LaneElement, MapElements, compile_map
 from selfplaydrive.maps.routing import route_tables
 from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.pedestrians import PedestrianSampler
-from selfplaydrive.scenario.spawner import PaperSpawner
+from selfplaydrive.scenario.spawner import STATIC_CLEAR_AHEAD, STATIC_HEADWAY, PaperSpawner
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
+from selfplaydrive.testing.spawn_reference import boxes_overlap_reference
 
 A, S, P, K = 32, 48, 8, 8
 
@@ -190,6 +191,48 @@ def test_static_vehicles_do_not_overlap(scenarios):
         assert np.all(d_ss >= r_s[:, None] + r_s[None] + 1.0 - 1e-3)
     counts = [int(s.static_valid.sum()) for s in scenarios]
     assert max(counts) > 10 and max(counts) <= S
+
+
+ATTRS = ("heading", "speed", "length", "width")
+
+
+def _static_conflicts(s: Scenario) -> tuple[int, int]:
+    """(agent-static box overlaps, statics in the lane right ahead of an agent: overlapping its
+    box stretched forward by STATIC_CLEAR_AHEAD + speed * STATIC_HEADWAY) of one scenario."""
+    a, st = np.flatnonzero(s.agent_valid), np.flatnonzero(s.static_valid)
+    f64 = np.float64
+    overlaps = ahead = 0
+    for i in a:
+        h, v, length, width = (float(getattr(s, f"agent_{n}")[i]) for n in ATTRS)
+        reach = STATIC_CLEAR_AHEAD + v * STATIC_HEADWAY
+        box = np.array([*s.agent_xy[i].astype(f64), h, length / 2, width / 2])
+        zone = box + np.array([0.5 * reach * np.cos(h), 0.5 * reach * np.sin(h), 0.0, 0.5 * reach, 0.0])
+        for j in st:
+            half = (s.static_length[j] / 2, s.static_width[j] / 2)
+            sbox = np.array([*s.static_xy[j].astype(f64), s.static_heading[j], *half])
+            if np.hypot(*(zone[:2] - sbox[:2])) > np.hypot(*zone[3:]) + np.hypot(*sbox[3:]) + 0.1:
+                continue
+            overlaps += boxes_overlap_reference(box, sbox)
+            ahead += boxes_overlap_reference(zone, sbox)
+    return overlaps, ahead
+
+
+def test_static_vehicles_keep_clear_of_agents(grid_map):
+    """No static vehicle overlaps an agent's box or stands in the lane right ahead of an agent
+    (within STATIC_CLEAR_AHEAD = 5 m + 1 s at its speed) at reset, over 300 worlds. Before this
+    rule, statics stood within a car length right ahead of some agent in ~80% of grid worlds."""
+    scs = sample_many(grid_map, 300, seed=21)
+    assert sum(_static_conflicts(s) != (0, 0) for s in scs) == 0
+    assert sum(int(s.static_valid.sum()) for s in scs) > 300 * 15
+    # the check sees a static put 2 m in front of an aligned agent
+    s = scs[0]
+    i = int(np.flatnonzero(s.agent_valid & ~s.agent_parked)[0])
+    k = int(np.flatnonzero(s.static_valid)[0])
+    h = float(s.agent_heading[i])
+    gap = s.agent_length[i] / 2 + 2.0 + s.static_length[k] / 2
+    s.static_xy[k] = s.agent_xy[i] + gap * np.array([np.cos(h), np.sin(h)], dtype=np.float32)
+    s.static_heading[k] = h
+    assert _static_conflicts(s)[1] >= 1
 
 
 def test_static_vehicles_leave_lane_partly_free(scenarios, grid_map):
