@@ -88,13 +88,21 @@ cdef inline bint segs_cross(float ax, float ay, float bx, float by,
     return ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and d1 != d2 and d3 != d4
 
 
-cdef inline bint cand_less(float da, int32_t ia, float db, int32_t ib) noexcept nogil:
-    """Order by distance, then index: a strict total order, so selection is deterministic."""
-    return da < db or (da == db and ia < ib)
+cdef inline bint cand_less(float da, int32_t ia, float db, int32_t ib,
+                           const int32_t* key) noexcept nogil:
+    """Order by distance, then by key[index] (or the index itself when key is NULL): a strict
+    total order, so selection is deterministic. The key is only read on a distance tie."""
+    if da != db:
+        return da < db
+    if key != NULL:
+        return key[ia] < key[ib]
+    return ia < ib
 
 
-cdef inline void select_nearest(float* d, int32_t* idx, int n, int k) noexcept nogil:
-    """Partially reorder (d, idx)[:n] so its first k entries are the k smallest (quickselect)."""
+cdef inline void select_nearest(float* d, int32_t* idx, int n, int k,
+                                const int32_t* key=NULL) noexcept nogil:
+    """Partially reorder (d, idx)[:n] so its first k entries are the k smallest by (distance,
+    key[idx]) (quickselect); key NULL: ties by idx itself."""
     cdef int lo = 0, hi = n - 1, i, j, mid
     cdef float pd, td
     cdef int32_t pi, ti
@@ -107,9 +115,9 @@ cdef inline void select_nearest(float* d, int32_t* idx, int n, int k) noexcept n
         i = lo
         j = hi
         while i <= j:
-            while cand_less(d[i], idx[i], pd, pi):
+            while cand_less(d[i], idx[i], pd, pi, key):
                 i += 1
-            while cand_less(pd, pi, d[j], idx[j]):
+            while cand_less(pd, pi, d[j], idx[j], key):
                 j -= 1
             if i <= j:
                 td = d[i]; d[i] = d[j]; d[j] = td
@@ -140,7 +148,7 @@ cdef inline int bin64(float v, float dmin, float inv) noexcept nogil:
 
 
 cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, float dmin,
-                                       float dmax) noexcept nogil:
+                                       float dmax, const int32_t* key=NULL) noexcept nogil:
     """Same result set as select_nearest for values in [dmin, dmax], in two linear passes: a
     64-bin histogram finds the bin holding the k-th value, entries of lower bins move to the
     front, and quickselect runs only on the boundary bin (robust O(n), no bad pivots)."""
@@ -166,4 +174,4 @@ cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, flo
         if bin64(d[t], dmin, inv) == kb:
             swap_cand(d, idx, t, p)
             p += 1
-    select_nearest(d + m, idx + m, p - m, k - m)
+    select_nearest(d + m, idx + m, p - m, k - m, key)

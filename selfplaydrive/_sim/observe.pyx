@@ -22,10 +22,9 @@ cdef extern from "rows.h" nogil:
         const float* cols
         ptrdiff_t stride
         const int32_t* group
-        const int32_t* id
-    void spd_road_rows(float* o, int32_t* idx, int n, const float* recs, const spd_road_cols* rc,
-                       float x, float y, float c, float s, float cp, float sp,
-                       const int8_t* gstate, int G)
+    void spd_road_rows(float* o, const int32_t* idx, int n, const float* recs,
+                       const spd_road_cols* rc, float x, float y, float c, float s, float cp,
+                       float sp, const int8_t* gstate, int G)
     void spd_object_rows(float* o, const int32_t* cand, int n, const float* table, float x,
                          float y, float c, float s, float cp, float sp, float cv, float sv)
 
@@ -173,8 +172,7 @@ cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int own, cons
 cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i, float* o) noexcept nogil:
     """The segments chosen by the events gather: midpoint, direction (cos, sin, no trig: the
     directions are precomputed), length, type and traffic-light state, from the packed atlas
-    record of each segment. The gather leaves atlas positions in road_idx; they are replaced
-    here by global segment indices."""
+    record of each segment, at the atlas positions the gather left in road_idx."""
     cdef int n = sim.road_n[i]
     cdef int32_t* idx = &sim.road_idx[<int64_t>i * sim.max_road]
     # the position scale folded into the rotation: one multiply per coordinate
@@ -185,7 +183,6 @@ cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
     rc.cols = atlas.seg_cols
     rc.stride = atlas.num_segments + 8
     rc.group = atlas.seg_group
-    rc.id = atlas.seg_id
     spd_road_rows(o, idx, n, atlas.seg_rec, &rc, sim.x[i], sim.y[i], c, s, cp, sp,
                   &sim.light_state[w * sim.G], sim.G)
     memset(o + n * ROAD_DIM, 0, (sim.max_road - n) * ROAD_DIM * sizeof(float))

@@ -240,3 +240,29 @@ cdef class World:
         with nogil:
             for k in prange(n, num_threads=num_threads, schedule="static"):
                 reset_one(&self.sim, &self.atlas, &self.prm, ws[k])
+
+
+ctypedef fused action_int:
+    int32_t
+    int64_t
+
+
+def copy_discrete(const action_int[:, ::1] a, int32_t[:, ::1] out, int n_acc, int n_steer):
+    """Range-check (N, 2) action indices and copy them into `out` (int32) in one pass, for the
+    common dtypes (int32, int64; others take the NumPy path in sim/actions.py). Returns -1 when
+    every index is valid, else the row of the first bad one (then nothing is copied, and the
+    caller's NumPy check raises the error that names it)."""
+    cdef Py_ssize_t i, bad = -1, n = a.shape[0]
+    if a.shape[1] != 2 or out.shape[0] != n or out.shape[1] != 2:
+        raise ValueError(f"copy_discrete: expected (N, 2) arrays, got {a.shape[0]}x{a.shape[1]} "
+                         f"and {out.shape[0]}x{out.shape[1]}")
+    with nogil:
+        for i in range(n):
+            if not (0 <= a[i, 0] < n_acc and 0 <= a[i, 1] < n_steer):
+                bad = i
+                break
+        if bad < 0:
+            for i in range(n):
+                out[i, 0] = <int32_t>a[i, 0]
+                out[i, 1] = <int32_t>a[i, 1]
+    return bad

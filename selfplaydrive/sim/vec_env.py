@@ -24,7 +24,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from selfplaydrive._sim.world import STAGES, World
+from selfplaydrive._sim.world import STAGES, World, copy_discrete
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
@@ -35,6 +35,7 @@ from selfplaydrive.sim.buffers import Dims, allocate, check_scenario, pack
 from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.params import SimParams
 
+_FAST_ACTION_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
 EVER_BITS = {"collision": 1, "pedestrian_collision": 2, "offroad": 4, "red_light": 8}
 
 
@@ -198,11 +199,13 @@ class VecEnv:
         Raises:
             ValueError: Actions of the wrong type, shape or dtype, out of range or not finite.
         """
-        a = self.action_table.validate(actions, self.num_agents)
-        np.copyto(self.buffers["act_i" if self.action_table.discrete else "act_f"], a)
+        if not self._copy_discrete_fast(actions):
+            a = self.action_table.validate(actions, self.num_agents)
+            np.copyto(self.buffers["act_i" if self.action_table.discrete else "act_f"], a)
         np.copyto(self.reward_mask, self.masks)
         if self._external_physics:
-            self._step_external_physics(a)
+            t = self.action_table
+            self._step_external_physics(self.buffers["act_i" if t.discrete else "act_f"])
         self._world.step(self.num_threads, self.profile)
         if self.reward_hooks:
             self._run_reward_hooks()
@@ -214,6 +217,21 @@ class VecEnv:
         self._record_episodes(done)
         self._reset_worlds(done)
         self._run_obs_hooks(None)
+
+    def _copy_discrete_fast(self, actions: object) -> bool:
+        """Check and copy discrete actions of the usual kinds (C-contiguous int32/int64) in one
+        Cython pass (the NumPy checks take ~15 us per step for 1,024 agents). False: the
+        caller takes the NumPy path, which also names any bad value."""
+        t = self.action_table
+        if not (
+            t.discrete
+            and isinstance(actions, np.ndarray)
+            and actions.shape == (self.num_agents, 2)
+            and actions.dtype in _FAST_ACTION_DTYPES
+            and actions.flags.c_contiguous
+        ):
+            return False
+        return copy_discrete(actions, self.buffers["act_i"], len(t.accel), len(t.steer)) < 0
 
     def _step_external_physics(self, a: np.ndarray) -> None:
         """Dynamics stepped in Python (e.g. `PymunkModel`) before the kernels, which skip theirs."""
