@@ -202,6 +202,9 @@ ctypedef struct Sim:
     uint8_t* ever            # EV_* bits accumulated over the episode
     int32_t* road_idx        # (N, max_road) atlas positions of the road segments observed
     int32_t* road_n          # (N,) number of valid entries in road_idx
+    int32_t* obj_rows        # (N,) object rows written at the slot's last observation: the
+                             # rows after them are zero (observe.pyx clears only what changed)
+    int32_t* road_rows       # (N,) the same for the road rows
     float* road_r            # (N,) [m] distance of the max_road-th nearest segment at the last
                              # gather (obs_radius when fewer lie within it); < 0: no gather yet
     float* road_x            # (N,) [m] position of that gather (the bound holds wherever the

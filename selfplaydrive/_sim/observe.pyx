@@ -1,6 +1,9 @@
 # cython: language_level=3
-"""Observations (paper section 2.5), written once per active agent row, padding included (no
-buffer-wide clearing). Layout and feature names: selfplaydrive/sim/layout.py. Every value is
+"""Observations (paper section 2.5), written once per active agent row. Padding rows are zero:
+only the observation stage writes `obs` (the env exposes it read-only), so a slot's rows past
+the count it wrote last time are still zero, and only the rows between the new and the old
+count are cleared (on average 38 of 63 object rows are padding: clearing them every step was
+~16 % of the observation's bytes). Layout and feature names: selfplaydrive/sim/layout.py. Every value is
 scaled and clipped to [-1, 1]; positions and directions are in the ego frame (x forward,
 y left)."""
 
@@ -166,7 +169,7 @@ cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int own, cons
         select_nearest(cd, cand, n, sim.max_obj)
         n = sim.max_obj
     spd_object_rows(o, cand, n, table, x, y, c, s, cp, sp, cv, sv)
-    memset(o + n * OBJ_DIM, 0, (sim.max_obj - n) * OBJ_DIM * sizeof(float))
+    clear_rows(o, n, &sim.obj_rows[i], OBJ_DIM)
 
 
 cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i, float* o) noexcept nogil:
@@ -185,4 +188,12 @@ cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
     rc.group = atlas.seg_group
     spd_road_rows(o, idx, n, atlas.seg_rec, &rc, sim.x[i], sim.y[i], c, s, cp, sp,
                   &sim.light_state[w * sim.G], sim.G)
-    memset(o + n * ROAD_DIM, 0, (sim.max_road - n) * ROAD_DIM * sizeof(float))
+    clear_rows(o, n, &sim.road_rows[i], ROAD_DIM)
+
+
+cdef inline void clear_rows(float* o, int n, int32_t* written, int dim) noexcept nogil:
+    """Zero rows [n, written) of a block whose rows from `written` on are already zero, and
+    record n as the new count of written rows."""
+    if written[0] > n:
+        memset(o + n * dim, 0, (written[0] - n) * dim * sizeof(float))
+    written[0] = n

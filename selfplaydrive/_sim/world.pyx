@@ -111,6 +111,8 @@ cdef class World:
         self.sim.lane_valid = <uint8_t*>ptr(s, "lane_valid", u1, k)
         self.sim.events = <uint8_t*>ptr(s, "events", u1, k); self.sim.ever = <uint8_t*>ptr(s, "ever", u1, k)
         self.sim.road_idx = <int32_t*>ptr(s, "road_idx", i4, k); self.sim.road_n = <int32_t*>ptr(s, "road_n", i4, k)
+        self.sim.obj_rows = <int32_t*>ptr(s, "obj_rows", i4, k)
+        self.sim.road_rows = <int32_t*>ptr(s, "road_rows", i4, k)
         self.sim.road_r = <float*>ptr(s, "road_r", f4, k)
         self.sim.road_x = <float*>ptr(s, "road_x", f4, k); self.sim.road_y = <float*>ptr(s, "road_y", f4, k)
         self.sim.act_i = <int32_t*>ptr(s, "act_i", i4, k); self.sim.act_f = <float*>ptr(s, "act_f", f4, k)

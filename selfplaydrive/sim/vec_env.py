@@ -140,8 +140,10 @@ class VecEnv:
         b = self.buffers
         self.num_agents = self.dims.W * self.dims.A
         self.agents_per_world = self.dims.A
-        self.observations = b["obs"]
-        self.final_observations = b["final_obs"]
+        # read-only views: the observation stage clears only the padding rows that changed
+        # (_sim/observe.pyx), so a write from outside would leave stale rows behind
+        self.observations = _read_only(b["obs"])
+        self.final_observations = _read_only(b["final_obs"])
         self.rewards = b["reward"]
         self.reward_terms = b["terms"]
         self.extra_terms = np.zeros((self.num_agents, len(self.reward_hooks)), dtype=np.float32)
@@ -281,9 +283,9 @@ class VecEnv:
                     f"got {f.shape}"
                 )
             rows = self.masks if ended is None else (self.masks | ended)
-            self.observations[rows, col : col + hook.dim] = f[rows]
+            self.buffers["obs"][rows, col : col + hook.dim] = f[rows]
             if ended is not None:
-                self.final_observations[ended, col : col + hook.dim] = f[ended]
+                self.buffers["final_obs"][ended, col : col + hook.dim] = f[ended]
             col += hook.dim
 
     # statistics -----------------------------------------------------------------------------
@@ -317,6 +319,18 @@ class VecEnv:
         out, self.episode_stats = self.episode_stats, []
         return out
 
+    def road_segments(self, slot: int) -> np.ndarray:
+        """Global segment indices (`RoadMap.segments` order, maps concatenated in the env's
+        order) of the road rows of agent `slot`'s current observation, row by row.
+
+        `state.road_idx` holds atlas positions (segments sorted by grid cell, sim/atlas.py);
+        this converts them, so the step itself skips the conversion.
+        """
+        if not 0 <= int(slot) < self.num_agents:
+            raise IndexError(f"slot: expected an agent slot in [0, {self.num_agents}), got {slot!r}")
+        n = int(self.buffers["road_n"][slot])
+        return self.atlas["seg_id"][self.buffers["road_idx"][slot, :n]].astype(np.int64)
+
     @property
     def timings(self) -> dict[str, float]:
         """Seconds spent per stage since construction (stages other than reset need profile=True)."""
@@ -325,6 +339,12 @@ class VecEnv:
     @property
     def stage_names(self) -> tuple[str, ...]:
         return (*STAGES, "reset")
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
 
 
 def _threads(n: int) -> int:
