@@ -142,9 +142,10 @@ cdef inline void swap_cand(float* d, int32_t* idx, int a, int b) noexcept nogil:
 cdef inline int bin64(float v, float dmin, float inv) noexcept nogil:
     """Bin in [0, 63] of v in [dmin, dmin + 64 / inv] (clamped in float: no int overflow)."""
     v = (v - dmin) * inv
-    if not v > 0.0:
-        return 0
-    return <int>v if v < 63.0 else 63
+    # max / min in float (maxss / minss: no branch); NaN goes to bin 0
+    v = v if v > 0.0 else 0.0
+    v = v if v < 63.0 else 63.0
+    return <int>v
 
 
 cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, float dmin,
@@ -165,13 +166,14 @@ cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, flo
     while kb < 63 and cum + counts[kb] < k:
         cum += counts[kb]
         kb += 1
+    # partitions without a data-dependent branch: swap unconditionally, advance on a match
+    # (entries between the front and t never match, so a swap that does not advance only
+    # exchanges two of them)
     for t in range(n):
-        if bin64(d[t], dmin, inv) < kb:
-            swap_cand(d, idx, t, m)
-            m += 1
+        swap_cand(d, idx, t, m)
+        m += bin64(d[m], dmin, inv) < kb
     p = m
     for t in range(m, n):
-        if bin64(d[t], dmin, inv) == kb:
-            swap_cand(d, idx, t, p)
-            p += 1
+        swap_cand(d, idx, t, p)
+        p += bin64(d[p], dmin, inv) == kb
     select_nearest(d + m, idx + m, p - m, k - m, key)
