@@ -5,7 +5,7 @@ reach of its box give road-edge contact, red-light crossing and lane association
 "Road gather"). Waypoint and comfort events are set here too.
 """
 
-from libc.math cimport sqrt, floor, atan2, fabs
+from libc.math cimport sqrt, floor, atan2f, fabs
 from libc.stdint cimport int32_t, int64_t
 from libc.string cimport memcpy
 from selfplaydrive._sim.common cimport (Sim, Params, Atlas, SEG_LANE, SEG_EDGE, SEG_LIGHT,
@@ -40,7 +40,7 @@ _set_simd(requested_simd())
 DEF RPAD = 0.01
 # [m] slack on the per-segment reach of the road-event pre-tests (float32 rounding)
 DEF EPAD = 0.01
-# candidates sorted into per-type lists at a time by road_events (stack scratch: 8 lists)
+# candidates sorted into per-type lists at a time by road_events (stack scratch: 3 lists)
 DEF EV_CHUNK = 128
 
 
@@ -385,9 +385,10 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
     exact tests. Every result is order-independent (any contact, any red crossing, the
     nearest centerline with ties to the lower global index), so the lists give the same
     events as one pass in scan order."""
-    cdef int t, k, p, g, ty, t0, t1, best_c = -1, best_a = -1
-    cdef int cnt[8]
-    cdef int32_t lst[8 * EV_CHUNK]
+    cdef int t, k, p, g, ty, t0, t1, ok, nl, ne, ng, best_c = -1, best_a = -1
+    cdef int32_t lanes[EV_CHUNK]
+    cdef int32_t edges[EV_CHUNK]
+    cdef int32_t lights[EV_CHUNK]
     cdef float lim[8]
     cdef float reach[8]
     cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld, rr
@@ -406,18 +407,24 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
     reach[SEG_LIGHT] = box_r + moved + EPAD
     for t0 in range(0, n, EV_CHUNK):
         t1 = min(t0 + EV_CHUNK, n)
-        for t in range(8):
-            cnt[t] = 0
+        nl = ne = ng = 0
         for t in range(t0, t1):
+            # counters in registers, each candidate written to all three lists and kept by
+            # the one it matches: no branch and no chain through a counter array in memory
             p = cand[t]
             d2 = cand_d[t]
             r = atlas.seg_rec + 8 * p  # the record line the observation rows read next
             ty = (<int>(r[5] * <float>4.0)) & 7  # type / 4, exact; build_atlas checks [0, 8)
             rr = reach[ty] + <float>0.5 * r[6]
-            lst[ty * EV_CHUNK + cnt[ty]] = p
-            cnt[ty] += (d2 <= lim[ty]) & (d2 <= rr * rr)
-        for k in range(cnt[SEG_LANE]):
-            p = lst[SEG_LANE * EV_CHUNK + k]
+            ok = (d2 <= lim[ty]) & (d2 <= rr * rr)
+            lanes[nl] = p
+            edges[ne] = p
+            lights[ng] = p
+            nl += ok & (ty == SEG_LANE)
+            ne += ok & (ty == SEG_EDGE)
+            ng += ok & (ty == SEG_LIGHT)
+        for k in range(nl):
+            p = lanes[k]
             r = atlas.seg_rec + 8 * p
             ld = point_rec_d2(r, x, y)
             if ld <= lr2:
@@ -430,14 +437,14 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
                     da = ld
                     best_a = p
         if not bits & EV_OFFROAD:
-            for k in range(cnt[SEG_EDGE]):
-                p = lst[SEG_EDGE * EV_CHUNK + k]
+            for k in range(ne):
+                p = edges[k]
                 if rec_touches(atlas.seg_rec + 8 * p, x, y, c, sn, hl, hw):
                     bits |= EV_OFFROAD
                     break  # more contacts change nothing
         if not bits & EV_RED:
-            for k in range(cnt[SEG_LIGHT]):
-                p = lst[SEG_LIGHT * EV_CHUNK + k]
+            for k in range(ng):
+                p = lights[k]
                 r = atlas.seg_rec + 8 * p
                 g = atlas.seg_group[p]
                 if g >= 0 and g < sim.G and sim.light_state[w * sim.G + g] == LIGHT_RED:
@@ -527,4 +534,4 @@ cdef void associate_lane(Sim* sim, const Atlas* atlas, int i, int s) noexcept no
     sim.lane_valid[i] = 1
     sim.lane_s[i] = ux * dy - uy * dx
     # the one atan2 per agent: alpha is needed as an angle by the alignment reward
-    sim.lane_alpha[i] = atan2(dx * sn - dy * c, dx * c + dy * sn)
+    sim.lane_alpha[i] = atan2f(dx * sn - dy * c, dx * c + dy * sn)
