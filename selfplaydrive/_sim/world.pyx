@@ -189,10 +189,13 @@ cdef class World:
         self.prm.inv_lateral_scale = 1.0 / self.prm.lateral_scale
         self.prm.inv_max_speed = 1.0 / self.prm.max_speed
 
-    def step(self, int num_threads=1, bint profile=False):
-        """Advance every world one step; with `profile`, stage by stage with timings."""
+    def step(self, int num_threads=1, bint profile=False, int chunk=0):
+        """Advance every world one step; with `profile`, stage by stage with timings. `chunk`:
+        worlds handed to a thread at a time (0: 2 when there are at least 4 per thread, else 1;
+        two neighbouring worlds' per-slot bytes fill one cache line)."""
         cdef int w, W = self.sim.W
-        cdef int chunk = 4 if W >= 8 * num_threads else 1
+        if chunk <= 0:
+            chunk = 2 if W >= 4 * num_threads else 1
         if profile:
             self._step_profiled(num_threads)
             return
