@@ -134,12 +134,15 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         cfg: The composed config.
         **overrides: Constructor arguments of `VecEnv` that replace the config's (e.g. hooks).
     """
-    kwargs = {
-        "maps": build_maps(cfg.map),
-        "spawner": instantiate(cfg.spawner),
-        "physics": instantiate(cfg.physics.model),
-        "obs": instantiate(cfg.obs),
+    # an override replaces the config's part without building it (e.g. `maps` given: the
+    # config's map file is not read)
+    parts = {
+        "maps": lambda: build_maps(cfg.map),
+        "spawner": lambda: instantiate(cfg.spawner),
+        "physics": lambda: instantiate(cfg.physics.model),
+        "obs": lambda: instantiate(cfg.obs),
     }
+    kwargs = {k: make() for k, make in parts.items() if k not in overrides}
     kwargs.update(overrides)
     # objects are passed to the partial, not to instantiate: Hydra would turn a dataclass such
     # as RoadMap into a structured config

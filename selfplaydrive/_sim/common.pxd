@@ -93,7 +93,7 @@ cdef enum:
 ctypedef struct Atlas:
     # Read-only road data of every map of the env, concatenated (sim/atlas.py). Segment arrays
     # are in atlas order (per map, sorted by grid cell); seg_id / seg_pos convert to and from
-    # the global segment index reported in `Sim.road_idx`.
+    # the global segment index (`Sim.road_idx` holds atlas positions).
     int num_maps             # number of maps
     int num_segments         # Ns, segments of all maps
     const float* seg_start   # (Ns, 2) [m] segment first endpoint, local frame of its map
@@ -104,9 +104,9 @@ ctypedef struct Atlas:
     const float* seg_my      # (Ns + 8,) [m] midpoint y
     const int32_t* seg_id    # (Ns + 8,) global segment index of each atlas position
     const int32_t* seg_pos   # (Ns,) atlas position of each global segment index
-    const float* seg_rec     # (Ns, 8) packed road-row record: mid x, mid y, dir x, dir y,
-                             # min(length / length_scale, 1), type / 4, signal group (-1: none),
-                             # global segment index (int32 bits) (_sim/rows.h)
+    const float* seg_rec     # (Ns, 8) packed record of the road events and rows: mid x, mid
+                             # y, dir x, dir y, min(length / length_scale, 1), type / 4,
+                             # length [m], signal group (-1: none) (_sim/rows.h, road.pyx)
     const float* seg_cols    # (4, Ns + 8) record lanes 2-5 as columns: dir x, dir y, scaled
                              # length, type / 4 (rows of consecutive segments, _sim/rows.h)
     const float* seg_dir     # (Ns, 2) unit direction start -> end (precomputed: no trig per step)
@@ -200,8 +200,11 @@ ctypedef struct Sim:
     uint8_t* lane_valid      # 1 when a centerline was found within lane_radius
     uint8_t* events          # EV_* bits of the last step
     uint8_t* ever            # EV_* bits accumulated over the episode
-    int32_t* road_idx        # (N, max_road) road segments chosen by the events gather
+    int32_t* road_idx        # (N, max_road) atlas positions of the road segments observed
     int32_t* road_n          # (N,) number of valid entries in road_idx
+    int32_t* obj_rows        # (N,) object rows written at the slot's last observation: the
+                             # rows after them are zero (observe.pyx clears only what changed)
+    int32_t* road_rows       # (N,) the same for the road rows
     float* road_r            # (N,) [m] distance of the max_road-th nearest segment at the last
                              # gather (obs_radius when fewer lie within it); < 0: no gather yet
     float* road_x            # (N,) [m] position of that gather (the bound holds wherever the

@@ -88,13 +88,21 @@ cdef inline bint segs_cross(float ax, float ay, float bx, float by,
     return ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and d1 != d2 and d3 != d4
 
 
-cdef inline bint cand_less(float da, int32_t ia, float db, int32_t ib) noexcept nogil:
-    """Order by distance, then index: a strict total order, so selection is deterministic."""
-    return da < db or (da == db and ia < ib)
+cdef inline bint cand_less(float da, int32_t ia, float db, int32_t ib,
+                           const int32_t* key) noexcept nogil:
+    """Order by distance, then by key[index] (or the index itself when key is NULL): a strict
+    total order, so selection is deterministic. The key is only read on a distance tie."""
+    if da != db:
+        return da < db
+    if key != NULL:
+        return key[ia] < key[ib]
+    return ia < ib
 
 
-cdef inline void select_nearest(float* d, int32_t* idx, int n, int k) noexcept nogil:
-    """Partially reorder (d, idx)[:n] so its first k entries are the k smallest (quickselect)."""
+cdef inline void select_nearest(float* d, int32_t* idx, int n, int k,
+                                const int32_t* key=NULL) noexcept nogil:
+    """Partially reorder (d, idx)[:n] so its first k entries are the k smallest by (distance,
+    key[idx]) (quickselect); key NULL: ties by idx itself."""
     cdef int lo = 0, hi = n - 1, i, j, mid
     cdef float pd, td
     cdef int32_t pi, ti
@@ -107,9 +115,9 @@ cdef inline void select_nearest(float* d, int32_t* idx, int n, int k) noexcept n
         i = lo
         j = hi
         while i <= j:
-            while cand_less(d[i], idx[i], pd, pi):
+            while cand_less(d[i], idx[i], pd, pi, key):
                 i += 1
-            while cand_less(pd, pi, d[j], idx[j]):
+            while cand_less(pd, pi, d[j], idx[j], key):
                 j -= 1
             if i <= j:
                 td = d[i]; d[i] = d[j]; d[j] = td
@@ -134,13 +142,14 @@ cdef inline void swap_cand(float* d, int32_t* idx, int a, int b) noexcept nogil:
 cdef inline int bin64(float v, float dmin, float inv) noexcept nogil:
     """Bin in [0, 63] of v in [dmin, dmin + 64 / inv] (clamped in float: no int overflow)."""
     v = (v - dmin) * inv
-    if not v > 0.0:
-        return 0
-    return <int>v if v < 63.0 else 63
+    # max / min in float (maxss / minss: no branch); NaN goes to bin 0
+    v = v if v > 0.0 else 0.0
+    v = v if v < 63.0 else 63.0
+    return <int>v
 
 
 cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, float dmin,
-                                       float dmax) noexcept nogil:
+                                       float dmax, const int32_t* key=NULL) noexcept nogil:
     """Same result set as select_nearest for values in [dmin, dmax], in two linear passes: a
     64-bin histogram finds the bin holding the k-th value, entries of lower bins move to the
     front, and quickselect runs only on the boundary bin (robust O(n), no bad pivots)."""
@@ -157,13 +166,14 @@ cdef inline void select_nearest_binned(float* d, int32_t* idx, int n, int k, flo
     while kb < 63 and cum + counts[kb] < k:
         cum += counts[kb]
         kb += 1
+    # partitions without a data-dependent branch: swap unconditionally, advance on a match
+    # (entries between the front and t never match, so a swap that does not advance only
+    # exchanges two of them)
     for t in range(n):
-        if bin64(d[t], dmin, inv) < kb:
-            swap_cand(d, idx, t, m)
-            m += 1
+        swap_cand(d, idx, t, m)
+        m += bin64(d[m], dmin, inv) < kb
     p = m
     for t in range(m, n):
-        if bin64(d[t], dmin, inv) == kb:
-            swap_cand(d, idx, t, p)
-            p += 1
-    select_nearest(d + m, idx + m, p - m, k - m)
+        swap_cand(d, idx, t, p)
+        p += bin64(d[p], dmin, inv) == kb
+    select_nearest(d + m, idx + m, p - m, k - m, key)

@@ -1,6 +1,9 @@
 # cython: language_level=3
-"""Observations (paper section 2.5), written once per active agent row, padding included (no
-buffer-wide clearing). Layout and feature names: selfplaydrive/sim/layout.py. Every value is
+"""Observations (paper section 2.5), written once per active agent row. Padding rows are zero:
+only the observation stage writes `obs` (the env exposes it read-only), so a slot's rows past
+the count it wrote last time are still zero, and only the rows between the new and the old
+count are cleared (on average 38 of 63 object rows are padding: clearing them every step was
+~16 % of the observation's bytes). Layout and feature names: selfplaydrive/sim/layout.py. Every value is
 scaled and clipped to [-1, 1]; positions and directions are in the ego frame (x forward,
 y left)."""
 
@@ -22,10 +25,9 @@ cdef extern from "rows.h" nogil:
         const float* cols
         ptrdiff_t stride
         const int32_t* group
-        const int32_t* id
-    void spd_road_rows(float* o, int32_t* idx, int n, const float* recs, const spd_road_cols* rc,
-                       float x, float y, float c, float s, float cp, float sp,
-                       const int8_t* gstate, int G)
+    void spd_road_rows(float* o, const int32_t* idx, int n, const float* recs,
+                       const spd_road_cols* rc, float x, float y, float c, float s, float cp,
+                       float sp, const int8_t* gstate, int G)
     void spd_object_rows(float* o, const int32_t* cand, int n, const float* table, float x,
                          float y, float c, float s, float cp, float sp, float cv, float sv)
 
@@ -167,14 +169,13 @@ cdef void write_objects(Sim* sim, const Params* prm, int w, int i, int own, cons
         select_nearest(cd, cand, n, sim.max_obj)
         n = sim.max_obj
     spd_object_rows(o, cand, n, table, x, y, c, s, cp, sp, cv, sv)
-    memset(o + n * OBJ_DIM, 0, (sim.max_obj - n) * OBJ_DIM * sizeof(float))
+    clear_rows(o, n, &sim.obj_rows[i], OBJ_DIM)
 
 
 cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i, float* o) noexcept nogil:
     """The segments chosen by the events gather: midpoint, direction (cos, sin, no trig: the
     directions are precomputed), length, type and traffic-light state, from the packed atlas
-    record of each segment. The gather leaves atlas positions in road_idx; they are replaced
-    here by global segment indices."""
+    record of each segment, at the atlas positions the gather left in road_idx."""
     cdef int n = sim.road_n[i]
     cdef int32_t* idx = &sim.road_idx[<int64_t>i * sim.max_road]
     # the position scale folded into the rotation: one multiply per coordinate
@@ -185,7 +186,14 @@ cdef void write_road(Sim* sim, const Atlas* atlas, const Params* prm, int w, int
     rc.cols = atlas.seg_cols
     rc.stride = atlas.num_segments + 8
     rc.group = atlas.seg_group
-    rc.id = atlas.seg_id
     spd_road_rows(o, idx, n, atlas.seg_rec, &rc, sim.x[i], sim.y[i], c, s, cp, sp,
                   &sim.light_state[w * sim.G], sim.G)
-    memset(o + n * ROAD_DIM, 0, (sim.max_road - n) * ROAD_DIM * sizeof(float))
+    clear_rows(o, n, &sim.road_rows[i], ROAD_DIM)
+
+
+cdef inline void clear_rows(float* o, int n, int32_t* written, int dim) noexcept nogil:
+    """Zero rows [n, written) of a block whose rows from `written` on are already zero, and
+    record n as the new count of written rows."""
+    if written[0] > n:
+        memset(o + n * dim, 0, (written[0] - n) * dim * sizeof(float))
+    written[0] = n

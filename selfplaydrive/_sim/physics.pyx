@@ -10,7 +10,7 @@ entering a turn too fast follows a larger radius (understeer). Speeds are clampe
 [0, max_speed] (no reversing). Integration: semi-implicit Euler, position with the new speed.
 """
 
-from libc.math cimport sqrt, tan, sin, cos, fabs
+from libc.math cimport sqrt, tanf, sinf, cosf, fabs
 from selfplaydrive._sim.common cimport (Sim, Params, PHYS_FRICTION, PHYS_EXTERNAL, H_FRICTION,
                                         H_ACCEL_GAIN, H_STEER_GAIN)
 from selfplaydrive._sim.geometry cimport wrap_angle
@@ -56,7 +56,7 @@ cdef inline double step_vehicle(Sim* sim, const Params* prm, int i) noexcept nog
     steer = steer * sim.hidden[3 * i + H_STEER_GAIN]
     v0 = sim.speed[i]
     lw = prm.wheelbase_ratio * sim.length[i]
-    tb = 0.5 * tan(steer)                       # tan(beta) with l_r / L = 1/2
+    tb = <float>0.5 * tanf(steer)                       # tan(beta) with l_r / L = 1/2
     sb = tb / sqrt(1.0 + tb * tb)               # sin(beta) without atan
     kappa = 2.0 * sb / lw                       # path curvature of the centre [1/m]
     if prm.physics == PHYS_FRICTION:
@@ -86,8 +86,8 @@ cdef inline double step_vehicle(Sim* sim, const Params* prm, int i) noexcept nog
     sim.y[i] = sim.y[i] + v1 * (sh * cb + ch * sb) * dt
     th = wrap_angle(sim.heading[i] + v1 * kappa * dt)
     sim.heading[i] = th
-    sim.hcos[i] = cos(th)
-    sim.hsin[i] = sin(th)
+    sim.hcos[i] = cosf(th)
+    sim.hsin[i] = sinf(th)
     sim.speed[i] = v1
     sim.a_long[i] = (v1 - v0) / dt
     sim.a_lat[i] = v1 * v1 * kappa

@@ -2,7 +2,7 @@
 """Reward terms, terminations and truncations (paper section 2.3), and the end-of-step
 bookkeeping of a world (final observations, ended agents, episode statistics)."""
 
-from libc.math cimport cos, exp, fabs, M_PI
+from libc.math cimport cosf, expf, fabs, M_PI
 from libc.string cimport memcpy
 from libc.stdint cimport int64_t
 from selfplaydrive._sim.common cimport (Sim, Params, EV_COLLIDE, EV_PED, EV_OFFROAD, EV_RED,
@@ -67,10 +67,10 @@ cdef void agent_terms(Sim* sim, const Params* prm, int i, float* t) noexcept nog
     if not sim.lane_valid[i]:
         return  # no centerline within lane_radius: the lane terms are zero
     al = sim.lane_alpha[i]
-    ca = cos(al)
+    ca = cosf(al)
     if fabs(al) < prm.center_max_angle:
         dev = fabs(cf[C_BIAS] - sim.lane_s[i])
-        t[T_CENTER] = cf[C_CENTER] * (-dev + 0.05 / exp(dev - 0.5))
+        t[T_CENTER] = cf[C_CENTER] * (-dev + 0.05 / expf(dev - <float>0.5))
     t[T_ALIGN] = cf[C_ALIGN] * (min(ca, 0.0) + 0.0025 * (1.0 - fabs(al) / (0.5 * M_PI)))
     if v >= prm.velocity_min:
         t[T_VELOCITY] = prm.velocity_reward * max(ca, 0.0)

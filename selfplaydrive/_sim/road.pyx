@@ -5,7 +5,7 @@ reach of its box give road-edge contact, red-light crossing and lane association
 "Road gather"). Waypoint and comfort events are set here too.
 """
 
-from libc.math cimport sqrt, floor, atan2, fabs
+from libc.math cimport sqrt, floor, atan2f, fabs
 from libc.stdint cimport int32_t, int64_t
 from libc.string cimport memcpy
 from selfplaydrive._sim.common cimport (Sim, Params, Atlas, SEG_LANE, SEG_EDGE, SEG_LIGHT,
@@ -40,6 +40,8 @@ _set_simd(requested_simd())
 DEF RPAD = 0.01
 # [m] slack on the per-segment reach of the road-event pre-tests (float32 rounding)
 DEF EPAD = 0.01
+# candidates sorted into per-type lists at a time by road_events (stack scratch: 3 lists)
+DEF EV_CHUNK = 128
 
 
 cdef void road_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
@@ -191,11 +193,8 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
     keep = min(ni + ns, maxr)
     b = keep - ni
     if b < ns:
-        for t in range(ns):
-            shell[t] = atlas.seg_id[shell[t]]  # ties by global index
-        select_nearest_binned(shell_d, shell, ns, b, max(lo * lo, 0.0), hi * hi)
-        for t in range(b):
-            shell[t] = atlas.seg_pos[shell[t]]
+        # ties by global index, looked up only on a tie
+        select_nearest_binned(shell_d, shell, ns, b, max(lo * lo, 0.0), hi * hi, atlas.seg_id)
     for t in range(b):
         out[ni + t] = shell[t]
         big = shell_d[t] if shell_d[t] > big else big
@@ -244,11 +243,8 @@ cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo,
     keep = min(ni + ns, maxr)
     b = keep - ni
     if b < ns:
-        for t in range(ns):
-            cand[half + t] = atlas.seg_id[cand[half + t]]  # ties by global index
-        select_nearest_binned(cd + half, cand + half, ns, b, max(lo * lo, 0.0), hi * hi)
-        for t in range(b):
-            cand[half + t] = atlas.seg_pos[cand[half + t]]
+        # ties by global index, looked up only on a tie
+        select_nearest_binned(cd + half, cand + half, ns, b, max(lo * lo, 0.0), hi * hi, atlas.seg_id)
     for t in range(b):
         out[ni + t] = cand[half + t]
         big = cd[half + t] if cd[half + t] > big else big
@@ -381,53 +377,83 @@ cdef void road_events(Sim* sim, const Atlas* atlas, const Params* prm, int w, in
     squared midpoint distances from the scan in `cand_d`; box_r: the
     box's bounding radius, moved: this step's displacement [m]). Before an exact test, a
     candidate is dropped when its midpoint is farther than the test's reach plus half its
-    own length (plus EPAD): then no point of it can pass the test, so no result changes."""
-    cdef int t, p, g, ty, best_c = -1, best_a = -1
-    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld
+    own length (plus EPAD): then no point of it can pass the test, so no result changes.
+
+    The candidates come in scan order with their types mixed, so a branch per candidate on
+    its type and reach is mispredicted often; a branch-free pass first sorts those that pass
+    the reach test into one short list per type (chunks of EV_CHUNK), then each list runs its
+    exact tests. Every result is order-independent (any contact, any red crossing, the
+    nearest centerline with ties to the lower global index), so the lists give the same
+    events as one pass in scan order."""
+    cdef int t, k, p, g, ty, t0, t1, ok, nl, ne, ng, best_c = -1, best_a = -1
+    cdef int32_t lanes[EV_CHUNK]
+    cdef int32_t edges[EV_CHUNK]
+    cdef int32_t lights[EV_CHUNK]
+    cdef float lim[8]
+    cdef float reach[8]
+    cdef float x = sim.x[i], y = sim.y[i], c = sim.hcos[i], sn = sim.hsin[i], d2, ld, rr
     cdef float hl = 0.5 * sim.length[i], hw = 0.5 * sim.width[i], R2 = prm.obs_radius * prm.obs_radius
-    cdef float dc = 1e30, da = 1e30, lr2 = prm.lane_radius * prm.lane_radius, rr
-    cdef float lane_reach = prm.lane_radius + EPAD, box_reach = box_r + EPAD
-    cdef float swept_reach = box_r + moved + EPAD
+    cdef float dc = 1e30, da = 1e30, lr2 = prm.lane_radius * prm.lane_radius, ex, ey
+    cdef const float* r
     cdef unsigned char bits = 0
-    for t in range(n):
-        p = cand[t]
-        d2 = cand_d[t]
-        if d2 > R2 or (d2 > near2 and d2 > lane_far2):
-            continue
-        ty = atlas.seg_type[p]
-        if ty == SEG_LANE:
-            if d2 <= lane_far2:
-                rr = lane_reach + <float>0.5 * atlas.seg_len[p]
-                if d2 > rr * rr:
-                    continue
-                ld = point_seg_d2(atlas, p, x, y)
-                if ld <= lr2:
-                    # ties go to the lower global segment index (the reference's argmin)
-                    if atlas.seg_dir[2 * p] * c + atlas.seg_dir[2 * p + 1] * sn > 0.0:
-                        if ld < dc or (ld == dc and atlas.seg_id[p] < atlas.seg_id[best_c]):
-                            dc = ld
-                            best_c = p
-                    if ld < da or (ld == da and atlas.seg_id[p] < atlas.seg_id[best_a]):
-                        da = ld
-                        best_a = p
-        elif d2 <= near2 and ty == SEG_EDGE:
-            if bits & EV_OFFROAD:
-                continue  # already set: more contacts change nothing
-            rr = box_reach + <float>0.5 * atlas.seg_len[p]
-            if d2 <= rr * rr and box_touches(atlas, p, x, y, c, sn, hl, hw):
-                bits |= EV_OFFROAD
-        elif d2 <= near2 and ty == SEG_LIGHT:
-            if bits & EV_RED:
-                continue
-            rr = swept_reach + <float>0.5 * atlas.seg_len[p]
-            if d2 > rr * rr:
-                continue
-            g = atlas.seg_group[p]
-            if g >= 0 and g < sim.G and sim.light_state[w * sim.G + g] == LIGHT_RED:
-                if box_touches(atlas, p, x, y, c, sn, hl, hw) or segs_cross(
-                        sim.px[i], sim.py[i], x, y, atlas.seg_start[2 * p], atlas.seg_start[2 * p + 1],
-                        atlas.seg_end[2 * p], atlas.seg_end[2 * p + 1]):
-                    bits |= EV_RED
+    for t in range(8):
+        lim[t] = -1.0  # other types: never listed (d2 >= 0)
+        reach[t] = 0.0
+    lim[SEG_LANE] = min(lane_far2, R2)
+    lim[SEG_EDGE] = min(near2, R2)
+    lim[SEG_LIGHT] = min(near2, R2)
+    reach[SEG_LANE] = prm.lane_radius + EPAD
+    reach[SEG_EDGE] = box_r + EPAD
+    reach[SEG_LIGHT] = box_r + moved + EPAD
+    for t0 in range(0, n, EV_CHUNK):
+        t1 = min(t0 + EV_CHUNK, n)
+        nl = ne = ng = 0
+        for t in range(t0, t1):
+            # counters in registers, each candidate written to all three lists and kept by
+            # the one it matches: no branch and no chain through a counter array in memory
+            p = cand[t]
+            d2 = cand_d[t]
+            r = atlas.seg_rec + 8 * p  # the record line the observation rows read next
+            ty = (<int>(r[5] * <float>4.0)) & 7  # type / 4, exact; build_atlas checks [0, 8)
+            rr = reach[ty] + <float>0.5 * r[6]
+            ok = (d2 <= lim[ty]) & (d2 <= rr * rr)
+            lanes[nl] = p
+            edges[ne] = p
+            lights[ng] = p
+            nl += ok & (ty == SEG_LANE)
+            ne += ok & (ty == SEG_EDGE)
+            ng += ok & (ty == SEG_LIGHT)
+        for k in range(nl):
+            p = lanes[k]
+            r = atlas.seg_rec + 8 * p
+            ld = point_rec_d2(r, x, y)
+            if ld <= lr2:
+                # ties go to the lower global segment index (the reference's argmin)
+                if r[2] * c + r[3] * sn > 0.0:
+                    if ld < dc or (ld == dc and atlas.seg_id[p] < atlas.seg_id[best_c]):
+                        dc = ld
+                        best_c = p
+                if ld < da or (ld == da and atlas.seg_id[p] < atlas.seg_id[best_a]):
+                    da = ld
+                    best_a = p
+        if not bits & EV_OFFROAD:
+            for k in range(ne):
+                p = edges[k]
+                if rec_touches(atlas.seg_rec + 8 * p, x, y, c, sn, hl, hw):
+                    bits |= EV_OFFROAD
+                    break  # more contacts change nothing
+        if not bits & EV_RED:
+            for k in range(ng):
+                p = lights[k]
+                r = atlas.seg_rec + 8 * p
+                g = atlas.seg_group[p]
+                if g >= 0 and g < sim.G and sim.light_state[w * sim.G + g] == LIGHT_RED:
+                    ex = <float>0.5 * r[6] * r[2]
+                    ey = <float>0.5 * r[6] * r[3]
+                    if rec_touches(r, x, y, c, sn, hl, hw) or segs_cross(
+                            sim.px[i], sim.py[i], x, y, r[0] - ex, r[1] - ey, r[0] + ex, r[1] + ey):
+                        bits |= EV_RED
+                        break
     sim.events[i] |= bits
     associate_lane(sim, atlas, i, best_c if best_c >= 0 else best_a)
 
@@ -457,11 +483,8 @@ cdef int keep_nearest(const Atlas* atlas, int32_t* cand, float* cd, int n, int m
         nb += (d > lo2) & (d <= hi2)
     keep = min(o + nb, maxr)
     if keep - o < nb:
-        for t in range(nb):
-            cand[t] = atlas.seg_id[cand[t]]  # ties by global index
-        select_nearest_binned(cd, cand, nb, keep - o, max(lo2, 0.0), hi2)
-        for t in range(keep - o):
-            cand[t] = atlas.seg_pos[cand[t]]
+        # ties by global index, looked up only on a tie
+        select_nearest_binned(cd, cand, nb, keep - o, max(lo2, 0.0), hi2, atlas.seg_id)
     for t in range(keep - o):
         out[o + t] = cand[t]
         big = cd[t] if cd[t] > big else big
@@ -470,21 +493,23 @@ cdef int keep_nearest(const Atlas* atlas, int32_t* cand, float* cd, int n, int m
     return keep
 
 
-cdef inline bint box_touches(const Atlas* atlas, int s, float x, float y, float c, float sn,
-                             float hl, float hw) noexcept nogil:
-    return seg_box(atlas.seg_start[2 * s], atlas.seg_start[2 * s + 1], atlas.seg_end[2 * s],
-                   atlas.seg_end[2 * s + 1], x, y, c, sn, hl, hw)
+cdef inline bint rec_touches(const float* r, float x, float y, float c, float sn, float hl,
+                             float hw) noexcept nogil:
+    """The segment of record r (sim/atlas.py `seg_rec`: midpoint, unit direction, length)
+    touches the box: its endpoints are midpoint -/+ half the length along the direction."""
+    cdef float ex = <float>0.5 * r[6] * r[2], ey = <float>0.5 * r[6] * r[3]
+    return seg_box(r[0] - ex, r[1] - ey, r[0] + ex, r[1] + ey, x, y, c, sn, hl, hw)
 
 
-cdef inline float point_seg_d2(const Atlas* atlas, int s, float x, float y) noexcept nogil:
-    """Squared distance [m^2] from (x, y) to segment s."""
-    cdef float ux = x - atlas.seg_start[2 * s], uy = y - atlas.seg_start[2 * s + 1]
-    cdef float dx = atlas.seg_dir[2 * s], dy = atlas.seg_dir[2 * s + 1]
+cdef inline float point_rec_d2(const float* r, float x, float y) noexcept nogil:
+    """Squared distance [m^2] from (x, y) to the segment of record r: the projection on the
+    direction from the midpoint, clamped to half the length on either side."""
+    cdef float ux = x - r[0], uy = y - r[1], dx = r[2], dy = r[3], h = <float>0.5 * r[6]
     cdef float t = ux * dx + uy * dy
-    if t < 0.0:
-        t = 0.0
-    elif t > atlas.seg_len[s]:
-        t = atlas.seg_len[s]
+    if t < -h:
+        t = -h
+    elif t > h:
+        t = h
     ux = ux - t * dx
     uy = uy - t * dy
     return ux * ux + uy * uy
@@ -494,16 +519,19 @@ cdef void associate_lane(Sim* sim, const Atlas* atlas, int i, int s) noexcept no
     """Signed lateral offset s (+ right of the lane direction) and angle alpha of agent i to
     centerline segment `s` (section 2.3); no lane within `lane_radius` gives s = alpha = 0."""
     cdef float dx, dy, ux, uy, c = sim.hcos[i], sn = sim.hsin[i]
+    cdef const float* r
     if s < 0:
         sim.lane_valid[i] = 0
         sim.lane_s[i] = 0.0
         sim.lane_alpha[i] = 0.0
         return
-    dx = atlas.seg_dir[2 * s]
-    dy = atlas.seg_dir[2 * s + 1]
-    ux = sim.x[i] - atlas.seg_start[2 * s]
-    uy = sim.y[i] - atlas.seg_start[2 * s + 1]
+    # offset from the midpoint: the same lateral offset as from the start (both on the line)
+    r = atlas.seg_rec + 8 * s
+    dx = r[2]
+    dy = r[3]
+    ux = sim.x[i] - r[0]
+    uy = sim.y[i] - r[1]
     sim.lane_valid[i] = 1
     sim.lane_s[i] = ux * dy - uy * dx
     # the one atan2 per agent: alpha is needed as an angle by the alignment reward
-    sim.lane_alpha[i] = atan2(dx * sn - dy * c, dx * c + dy * sn)
+    sim.lane_alpha[i] = atan2f(dx * sn - dy * c, dx * c + dy * sn)

@@ -7,7 +7,8 @@
  * write bit-identical rows (tests/sim/test_simd_fallback.py).
  *
  * Road record layout (sim/atlas.py `seg_rec`): mid x, mid y [m], dir x, dir y,
- * min(length / length_scale, 1), type / 4, signal group, global index (int32 bits).
+ * min(length / length_scale, 1), type / 4, length [m], signal group. The road events
+ * (road.pyx) read the same records, so the lines they load are those the rows need next.
  * Road row layout (sim/layout.py ROAD_FEATURES): valid, dx, dy, cos_dir, sin_dir, length,
  * type, light_state; dx, dy in the ego frame divided by pos_scale.
  * Object record (observe.pyx `body_table`): x, y, cos, sin, vx, vy [world frame],
@@ -52,19 +53,19 @@ static inline void spd_road_light_g(float *r, int32_t g, const int8_t *gstate, i
 
 /* the same from a record (lane 6 holds the group as a float) */
 static inline void spd_road_light(float *r, const float *rec, const int8_t *gstate, int G) {
-    if (rec[6] >= 0.0f)
-        spd_road_light_g(r, (int32_t)rec[6], gstate, G);
+    if (rec[7] >= 0.0f)
+        spd_road_light_g(r, (int32_t)rec[7], gstate, G);
 }
 
 /* The road features as columns, for blocks of rows whose segments are consecutive atlas
  * positions p0 .. p0 + 3 (read by the SSE2 version only): mid x, mid y, dir x, dir y,
- * length, type at mx[p], my[p], cols[k * stride + p] (k = 0..3), and the group and global
- * index (sim/atlas.py). The values are the records' own, so a block read from columns gives
- * the same rows. */
+ * length, type at mx[p], my[p], cols[k * stride + p] (k = 0..3), and the group
+ * (sim/atlas.py). The values are the records' own, so a block read from columns gives the
+ * same rows. */
 typedef struct {
     const float *mx, *my, *cols;
     ptrdiff_t stride;
-    const int32_t *group, *id;
+    const int32_t *group;
 } spd_road_cols;
 
 /* cv, sv: cos / sin divided by max_speed. */
@@ -82,9 +83,8 @@ static inline void spd_object_row(float *r, const float *rec, float x, float y, 
     r[8] = spd_clip(rec[5] * cv + rec[4] * -sv);
 }
 
-/* Road rows k0..n-1: row k from record recs[8 * idx[k]]; idx[k] becomes the segment's global
- * index (record lane 7). */
-static inline void spd_road_rows_c(float *o, int32_t *idx, int k0, int n, const float *recs,
+/* Road rows k0..n-1: row k from record recs[8 * idx[k]]. */
+static inline void spd_road_rows_c(float *o, const int32_t *idx, int k0, int n, const float *recs,
                                    float x, float y, float c, float s, float cp, float sp,
                                    const int8_t *gstate, int G) {
     int k;
@@ -93,7 +93,6 @@ static inline void spd_road_rows_c(float *o, int32_t *idx, int k0, int n, const 
         float *r = o + 8 * (ptrdiff_t)k;
         spd_road_row(r, rec, x, y, c, s, cp, sp);
         spd_road_light(r, rec, gstate, G);
-        memcpy(&idx[k], rec + 7, sizeof(int32_t));
     }
 }
 
@@ -111,7 +110,7 @@ static inline void spd_object_rows_c(float *o, const int32_t *cand, int k0, int 
 #if defined(__SSE2__)
 #define SPD_CLIP4(v) _mm_max_ps(_mm_min_ps((v), one), neg)
 
-static inline int spd_road_rows_sse2(float *o, int32_t *idx, int n, const float *recs,
+static inline int spd_road_rows_sse2(float *o, const int32_t *idx, int n, const float *recs,
                                      const spd_road_cols *rc, float x, float y, float c, float s,
                                      float cp, float sp, const int8_t *gstate, int G) {
     const __m128 one = _mm_set1_ps(1.0f), neg = _mm_set1_ps(-1.0f), zero = _mm_setzero_ps();
@@ -138,8 +137,6 @@ static inline int spd_road_rows_sse2(float *o, int32_t *idx, int n, const float 
             b0 = _mm_loadu_ps(rc->cols + 2 * st + p0);
             b1 = _mm_loadu_ps(rc->cols + 3 * st + p0);
             lights = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(g, _mm_set1_epi32(-1))));
-            _mm_storeu_si128((__m128i *)(idx + k),
-                             _mm_loadu_si128((const __m128i *)(rc->id + p0)));
             for (j = 0; j < 4; j++)
                 q[j] = recs + 8 * (ptrdiff_t)(p0 + j);
         } else {
@@ -156,9 +153,8 @@ static inline int spd_road_rows_sse2(float *o, int32_t *idx, int n, const float 
             b2 = _mm_loadu_ps(q[2] + 4);
             b3 = _mm_loadu_ps(q[3] + 4);
             _MM_TRANSPOSE4_PS(a0, a1, a2, a3); /* mid x, mid y, dir x, dir y */
-            _MM_TRANSPOSE4_PS(b0, b1, b2, b3); /* length, type, group, global index */
-            lights = _mm_movemask_ps(_mm_cmpge_ps(b2, zero));
-            _mm_storeu_si128((__m128i *)(idx + k), _mm_castps_si128(b3));
+            _MM_TRANSPOSE4_PS(b0, b1, b2, b3); /* length, type, length [m], group */
+            lights = _mm_movemask_ps(_mm_cmpge_ps(b3, zero));
         }
         __m128 ux = _mm_sub_ps(a0, X), uy = _mm_sub_ps(a1, Y);
         __m128 v1 = SPD_CLIP4(_mm_add_ps(_mm_mul_ps(ux, CP), _mm_mul_ps(uy, SP)));
@@ -263,55 +259,48 @@ static inline SPD_AVX2 void spd_tr8(__m256 *r) {
     r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
-/* Eight rows at a time from the packed records (transposed in and out). Unlike the SSE2
- * version, blocks of consecutive atlas positions are not read from the feature columns: the
- * columns take fewer instructions but touch eight arrays (eight cache lines per block where
- * the records take four), and with 32 worlds the map data of a step does not stay in the
- * per-core caches: reading the records was 4-6 % faster per agent-step (interleaved
- * timings, docs/world.md "Performance"). */
-static SPD_AVX2 int spd_road_rows_avx2(float *o, int32_t *idx, int n, const float *recs,
+/* Two rows per vector, no transposes: the rotated pairs (mid x, mid y) and (dir x, dir y) sit
+ * in the low half of a record, so both rows' low halves share one vector and the rotation is
+ * u * (cp, cp, c, c) + swap(u) * (sp, -sp, s, -s), with swap an in-lane shuffle; byte shifts
+ * then slide the results one float to the right behind the constant 1 and in front of
+ * (length, type) from the high halves. The products and sums are the plain-C row's, so the
+ * rows are bit-identical. (An 8 x 8 transpose in and out took twice the shuffles.) */
+static SPD_AVX2 int spd_road_rows_avx2(float *o, const int32_t *idx, int n, const float *recs,
                                        const spd_road_cols *rc, float x, float y, float c,
                                        float s, float cp, float sp, const int8_t *gstate,
                                        int G) {
+    const __m256 XY = _mm256_setr_ps(x, y, 0.0f, 0.0f, x, y, 0.0f, 0.0f);
+    const __m256 M1 = _mm256_setr_ps(cp, cp, c, c, cp, cp, c, c);
+    const __m256 M2 = _mm256_setr_ps(sp, -sp, s, -s, sp, -sp, s, -s);
     const __m256 one = _mm256_set1_ps(1.0f), neg = _mm256_set1_ps(-1.0f);
     const __m256 zero = _mm256_setzero_ps();
-    const __m256 X = _mm256_set1_ps(x), Y = _mm256_set1_ps(y), C = _mm256_set1_ps(c);
-    const __m256 S = _mm256_set1_ps(s), NS = _mm256_set1_ps(-s), CP = _mm256_set1_ps(cp);
-    const __m256 SP = _mm256_set1_ps(sp), NSP = _mm256_set1_ps(-sp);
-    int k = 0, j;
+    const int32_t *ip = idx;
+    float *r = o;
+    int k = 0;
     (void)rc;
-    for (; k + 8 <= n; k += 8) {
-        __m256 v[8];
-        const float *q[8];
-        float *r = o + 8 * (ptrdiff_t)k;
-        const int32_t *ip = idx + k;
-        int lights;
-        for (j = 0; j < 8; j++) {
-            q[j] = recs + 8 * (ptrdiff_t)ip[j];
-            v[j] = _mm256_loadu_ps(q[j]);
+    for (; k + 2 <= n; k += 2, ip += 2, r += 16) {
+        const float *qa = recs + ((ptrdiff_t)ip[0] << 3), *qb = recs + ((ptrdiff_t)ip[1] << 3);
+        __m256 lo4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa)),
+                                          _mm_loadu_ps(qb), 1);
+        __m256 hi4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa + 4)),
+                                          _mm_loadu_ps(qb + 4), 1);
+        __m256 u = _mm256_sub_ps(lo4, XY);          /* ux, uy, dir x, dir y (two rows) */
+        __m256 w = _mm256_permute_ps(u, 0xB1);      /* uy, ux, dir y, dir x */
+        __m256 v = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(u, M1), _mm256_mul_ps(w, M2)));
+        /* (1, dx, dy, cos) and (sin, length, type, 0) per row */
+        __m256 a = _mm256_castsi256_ps(
+            _mm256_alignr_epi8(_mm256_castps_si256(v), _mm256_castps_si256(one), 12));
+        __m256 b = _mm256_blend_ps(
+            _mm256_castsi256_ps(_mm256_alignr_epi8(_mm256_castps_si256(hi4),
+                                                   _mm256_castps_si256(v), 12)),
+            zero, 0x88);
+        _mm256_storeu_ps(r, _mm256_permute2f128_ps(a, b, 0x20));
+        _mm256_storeu_ps(r + 8, _mm256_permute2f128_ps(a, b, 0x31));
+        /* the group (lane 7 of each record) is -1 except on traffic-light lines */
+        if (__builtin_expect((_mm256_movemask_ps(hi4) & 0x88) != 0x88, 0)) {
+            spd_road_light(r, qa, gstate, G);
+            spd_road_light(r + 8, qb, gstate, G);
         }
-        spd_tr8(v); /* mid x, mid y, dir x, dir y, length, type, group, global index */
-        lights = _mm256_movemask_ps(_mm256_cmp_ps(v[6], zero, _CMP_GE_OQ));
-        _mm256_storeu_si256((__m256i *)(idx + k), _mm256_castps_si256(v[7]));
-        {
-            __m256 ux = _mm256_sub_ps(v[0], X), uy = _mm256_sub_ps(v[1], Y);
-            __m256 dx = v[2], dy = v[3];
-            v[6] = v[5];
-            v[5] = v[4];
-            v[1] = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(ux, CP), _mm256_mul_ps(uy, SP)));
-            v[2] = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(uy, CP), _mm256_mul_ps(ux, NSP)));
-            v[3] = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(dx, C), _mm256_mul_ps(dy, S)));
-            v[4] = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(dy, C), _mm256_mul_ps(dx, NS)));
-            v[0] = one;
-            v[7] = zero;
-            spd_tr8(v);
-            for (j = 0; j < 8; j++)
-                _mm256_storeu_ps(r + 8 * j, v[j]);
-        }
-        if (lights)
-            for (j = 0; j < 8; j++)
-                if (lights >> j & 1)
-                    spd_road_light(r + 8 * j, q[j], gstate, G);
     }
     return k;
 }
@@ -359,9 +348,8 @@ static SPD_AVX2 int spd_object_rows_avx2(float *o, const int32_t *cand, int n,
 /* ---------------------------------------------------------------- dispatch */
 
 /* The road rows of one agent: o[8 k ...] from record recs[8 idx[k]] for k < n (or, for
- * blocks of consecutive positions, from the same values in columns `rc`); idx[k] becomes
- * the global segment index. */
-static inline void spd_road_rows(float *o, int32_t *idx, int n, const float *recs,
+ * blocks of consecutive positions, from the same values in columns `rc`). */
+static inline void spd_road_rows(float *o, const int32_t *idx, int n, const float *recs,
                                  const spd_road_cols *rc, float x, float y, float c, float s,
                                  float cp, float sp, const int8_t *gstate, int G) {
     int k = 0;

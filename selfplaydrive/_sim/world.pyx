@@ -111,6 +111,8 @@ cdef class World:
         self.sim.lane_valid = <uint8_t*>ptr(s, "lane_valid", u1, k)
         self.sim.events = <uint8_t*>ptr(s, "events", u1, k); self.sim.ever = <uint8_t*>ptr(s, "ever", u1, k)
         self.sim.road_idx = <int32_t*>ptr(s, "road_idx", i4, k); self.sim.road_n = <int32_t*>ptr(s, "road_n", i4, k)
+        self.sim.obj_rows = <int32_t*>ptr(s, "obj_rows", i4, k)
+        self.sim.road_rows = <int32_t*>ptr(s, "road_rows", i4, k)
         self.sim.road_r = <float*>ptr(s, "road_r", f4, k)
         self.sim.road_x = <float*>ptr(s, "road_x", f4, k); self.sim.road_y = <float*>ptr(s, "road_y", f4, k)
         self.sim.act_i = <int32_t*>ptr(s, "act_i", i4, k); self.sim.act_f = <float*>ptr(s, "act_f", f4, k)
@@ -187,10 +189,13 @@ cdef class World:
         self.prm.inv_lateral_scale = 1.0 / self.prm.lateral_scale
         self.prm.inv_max_speed = 1.0 / self.prm.max_speed
 
-    def step(self, int num_threads=1, bint profile=False):
-        """Advance every world one step; with `profile`, stage by stage with timings."""
+    def step(self, int num_threads=1, bint profile=False, int chunk=0):
+        """Advance every world one step; with `profile`, stage by stage with timings. `chunk`:
+        worlds handed to a thread at a time (0: 2 when there are at least 4 per thread, else 1;
+        two neighbouring worlds' per-slot bytes fill one cache line)."""
         cdef int w, W = self.sim.W
-        cdef int chunk = 4 if W >= 8 * num_threads else 1
+        if chunk <= 0:
+            chunk = 2 if W >= 4 * num_threads else 1
         if profile:
             self._step_profiled(num_threads)
             return
@@ -240,3 +245,29 @@ cdef class World:
         with nogil:
             for k in prange(n, num_threads=num_threads, schedule="static"):
                 reset_one(&self.sim, &self.atlas, &self.prm, ws[k])
+
+
+ctypedef fused action_int:
+    int32_t
+    int64_t
+
+
+def copy_discrete(const action_int[:, ::1] a, int32_t[:, ::1] out, int n_acc, int n_steer):
+    """Range-check (N, 2) action indices and copy them into `out` (int32) in one pass, for the
+    common dtypes (int32, int64; others take the NumPy path in sim/actions.py). Returns -1 when
+    every index is valid, else the row of the first bad one (then nothing is copied, and the
+    caller's NumPy check raises the error that names it)."""
+    cdef Py_ssize_t i, bad = -1, n = a.shape[0]
+    if a.shape[1] != 2 or out.shape[0] != n or out.shape[1] != 2:
+        raise ValueError(f"copy_discrete: expected (N, 2) arrays, got {a.shape[0]}x{a.shape[1]} "
+                         f"and {out.shape[0]}x{out.shape[1]}")
+    with nogil:
+        for i in range(n):
+            if not (0 <= a[i, 0] < n_acc and 0 <= a[i, 1] < n_steer):
+                bad = i
+                break
+        if bad < 0:
+            for i in range(n):
+                out[i, 0] = <int32_t>a[i, 0]
+                out[i, 1] = <int32_t>a[i, 1]
+    return bad

@@ -146,7 +146,7 @@ class CheckpointPolicy:
             start = masks & (~self.prev_acted | ended)
         self.prev_acted = masks.copy()
         with torch.no_grad():
-            obs = torch.from_numpy(np.ascontiguousarray(observations)).to(self.device)
+            obs = torch.tensor(observations, dtype=torch.float32, device=self.device)  # a copy
             logits, _, self.state = self.model(obs, self.state, torch.from_numpy(start).to(self.device))
             actions = sample_actions(
                 logits.float(), self.model.nvec, self.deterministic, generator=self.generator

@@ -116,15 +116,22 @@ def build_atlas(
     seg_len = np.ascontiguousarray(np.concatenate(parts["len"]), dtype=f4)
     seg_type = np.ascontiguousarray(np.concatenate(parts["type"]), dtype=np.int8)
     seg_group = np.ascontiguousarray(np.concatenate(parts["group"]), dtype=np.int32)
-    # one 32-byte record per segment for the road observation rows (_sim/rows.h): the
-    # constant features precomputed, the group and the global index in the last two lanes
+    if len(seg_type) and not (seg_type.min() >= 0 and seg_type.max() < 8):
+        bad = int(np.flatnonzero((seg_type < 0) | (seg_type >= 8))[0])
+        raise ValueError(
+            f"maps: segment at atlas position {bad} has type {int(seg_type[bad])}, expected a "
+            "SegmentType in [0, 8)"
+        )
+    # one 32-byte record per segment, read by the road events and the observation rows
+    # (_sim/road.pyx, _sim/rows.h): midpoint, direction, the row's scaled length and type,
+    # the length [m] and the signal group (-1: none)
     rec = np.zeros((len(seg_id), 8), dtype=f4)
     rec[:, 0:2] = mid
     rec[:, 2:4] = seg_dir
     rec[:, 4] = np.minimum(seg_len / f4(length_scale), f4(1.0))
     rec[:, 5] = seg_type.astype(f4) * f4(0.25)
-    rec[:, 6] = seg_group.astype(f4)
-    rec[:, 7] = seg_id.view(f4)
+    rec[:, 6] = seg_len
+    rec[:, 7] = seg_group.astype(f4)
     # the same features as columns (dir x, dir y, length, type), for blocks of rows whose
     # segments are consecutive atlas positions (_sim/rows.h, SSE2 version); 8 entries of padding, like
     # seg_mx, seg_my, seg_id and seg_group: the SIMD kernels read whole vectors

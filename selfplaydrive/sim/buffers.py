@@ -62,7 +62,7 @@ def allocate(d: Dims) -> dict[str, np.ndarray]:
         "road_r road_x road_y"
     ).split():
         shapes[name] = ((N,), f4)
-    for name in "num_wp wp_idx road_n".split():
+    for name in "num_wp wp_idx road_n obj_rows road_rows".split():
         shapes[name] = ((N,), i4)
     for name in "agent_valid active obstacle lane_valid events ever term trunc".split():
         shapes[name] = ((N,), u1)

@@ -184,3 +184,80 @@ def test_determinism_500_steps_one_and_two_threads(cmap):
     d1 = rollout_digest(cmap, 1, 500)
     assert d1 == rollout_digest(cmap, 2, 500)
     assert d1 == rollout_digest(cmap, 1, 500)
+
+
+def _bodies_in_range(env, i: int) -> int:
+    """Bodies agent slot i observes (NumPy count): other agents (active, obstacles, or ended
+    this step: the observation precedes their removal), static vehicles, present pedestrians
+    within the observation radius, at most max_objects."""
+    st, A = env.state, env.agents_per_world
+    w = i // A
+    a = slice(w * A, (w + 1) * A)
+    s = slice(w * env.dims.S, (w + 1) * env.dims.S)
+    p = slice(w * env.dims.P, (w + 1) * env.dims.P)
+    keep = (st.active[a] | st.obstacle[a] | st.term[a] | st.trunc[a]).astype(bool)
+    keep[i - w * A] = False
+    xs = np.concatenate([st.x[a][keep], st.st_x[s][st.st_valid[s] > 0],
+                         st.ped_x[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)]])
+    ys = np.concatenate([st.y[a][keep], st.st_y[s][st.st_valid[s] > 0],
+                         st.ped_y[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)]])
+    d2 = (xs - st.x[i]) ** 2 + (ys - st.y[i]) ** 2
+    return min(int(np.count_nonzero(d2 <= env.obs_config.radius**2)), env.layout.max_objects)
+
+
+def test_padding_rows_stay_zero_and_observations_are_read_only():
+    """The observation stage clears only the padding rows whose count changed since the slot's
+    last observation; over a rollout on the bundled town (object counts rise and fall, agents
+    end, worlds reset) every padding row must still be zero and every valid row first."""
+    from selfplaydrive.maps.loader import load_map
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    env = VecEnv(load_map("default"), PaperSpawner(), 4, seed=5)
+    env.reset(5)
+    lay = env.layout
+    rng = np.random.default_rng(2)
+    counts = set()
+    for step in range(160):
+        env.step(rng.integers(0, [7, 13], size=(env.num_agents, 2)))
+        rows = env.observations[env.masks]
+        for start, n, dim in (
+            (lay.ego_dim, lay.max_objects, 9),
+            (lay.ego_dim + 9 * lay.max_objects, lay.max_road, 8),
+        ):
+            block = rows[:, start : start + n * dim].reshape(len(rows), n, dim)
+            if dim == 9:
+                k = np.array([_bodies_in_range(env, i) for i in np.flatnonzero(env.masks)])
+                counts.update(k.tolist())
+            else:
+                k = env.state.road_n[env.masks]
+            valid = np.arange(n)[None, :] < k[:, None]
+            assert np.all(block[valid][:, 0] == 1.0), step
+            assert not np.any(block[~valid]), f"stale padding row at step {step}"
+    assert len(counts) > 10  # the object counts did change
+    with pytest.raises(ValueError):
+        env.observations[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        env.final_observations[0, 0] = 1.0
+
+
+def test_road_segments_are_global_indices_of_the_road_rows():
+    """`road_segments` converts the atlas positions of `road_idx` to `RoadMap.segments`
+    indices: each row's midpoint, in the ego frame, is that segment's midpoint."""
+    from selfplaydrive.maps.loader import load_map
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    road_map = load_map("default")
+    env = VecEnv(road_map, PaperSpawner(), 1, seed=1)
+    env.reset(1)
+    lay, st = env.layout, env.state
+    i = int(np.flatnonzero(env.masks)[0])
+    seg = env.road_segments(i)
+    assert len(seg) == st.road_n[i] > 0 and len(set(seg.tolist())) == len(seg)
+    rows = env.observations[i, lay.ego_dim + 9 * lay.max_objects :][: 8 * len(seg)].reshape(-1, 8)
+    mid = road_map.segments.mid[seg].astype(np.float64)
+    c, s = float(st.hcos[i]), float(st.hsin[i])
+    dx, dy = mid[:, 0] - st.x[i], mid[:, 1] - st.y[i]
+    want = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=1) / env.obs_config.radius
+    np.testing.assert_allclose(rows[:, 1:3], np.clip(want, -1, 1), atol=2e-5)
+    with pytest.raises(IndexError):
+        env.road_segments(env.num_agents)

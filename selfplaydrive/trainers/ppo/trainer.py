@@ -123,7 +123,7 @@ class PPOTrainer:
         reusing a staging buffer is safe because every env step synchronises once (the action
         download) after the previous upload from it was queued."""
         if not self.pinned:
-            return torch.from_numpy(array).to(self.device, copy=True)
+            return torch.tensor(array, device=self.device)  # a copy (env buffers are read-only)
         buf = self._staging.get(key)
         if buf is None or tuple(buf.shape) != array.shape:
             buf = torch.from_numpy(np.empty_like(array)).pin_memory()

@@ -10,10 +10,10 @@
 #include <string.h>
 int sse_init(int), c_init(int);
 void sse_road_rows(float *, int32_t *, int, const float *, const float *, const float *, const float *,
-                   ptrdiff_t, const int32_t *, const int32_t *, float, float, float, float, float, float,
+                   ptrdiff_t, const int32_t *, float, float, float, float, float, float,
                    const int8_t *, int);
 void c_road_rows(float *, int32_t *, int, const float *, const float *, const float *, const float *,
-                 ptrdiff_t, const int32_t *, const int32_t *, float, float, float, float, float, float,
+                 ptrdiff_t, const int32_t *, float, float, float, float, float, float,
                  const int8_t *, int);
 void sse_obj_rows(float *, const int32_t *, int, const float *, float, float, float, float, float, float,
                   float, float);
@@ -35,7 +35,7 @@ static int32_t bits(float f) { int32_t i; memcpy(&i, &f, 4); return i; }
 #define NR 203 /* rows per call: 25 AVX2 blocks + 0 SSE2 blocks + 3 plain-C rows at level 2 */
 int main(void) {
     static float recs[NS * 8], mx[NS + 8], my[NS + 8], cols[4 * (NS + 8)], table[64 * 8];
-    static int32_t group[NS + 8], ids[NS + 8];
+    static int32_t group[NS + 8];
     static float o1[NR * 9], o2[NR * 9];
     static int32_t idx0[NR], idx1[NR], idx2[NR], cand[64];
     int8_t gstate[3] = {1, 2, 3};
@@ -46,11 +46,11 @@ int main(void) {
         float *r = recs + 8 * k, h = u() * 3.14f;
         r[0] = u() * 150; r[1] = u() * 150; r[2] = cosf(h); r[3] = sinf(h);
         r[4] = (u() + 1) * 0.6f; r[5] = (rand() % 5) * 0.25f;
-        r[6] = (rand() % 4 == 0) ? (float)(rand() % 5 - 1) : -1.0f; /* groups -1..3, G = 3 */
-        memcpy(&r[7], &k, 4);
+        r[6] = (u() + 1) * 12.0f; /* length [m] */
+        r[7] = (rand() % 4 == 0) ? (float)(rand() % 5 - 1) : -1.0f; /* groups -1..3, G = 3 */
         mx[k] = r[0]; my[k] = r[1];
         for (it = 0; it < 4; it++) cols[it * (NS + 8) + k] = r[2 + it];
-        group[k] = (int32_t)r[6]; ids[k] = k;
+        group[k] = (int32_t)r[7];
     }
     for (k = 0; k < 64 * 8; k++) table[k] = u() * 60;
     for (level = 0; level <= 2; level++) {
@@ -63,9 +63,9 @@ int main(void) {
             for (k = 0; k < n; k++) idx0[k] = (k > 0 && rand() % 8) ? (idx0[k - 1] + 1) % NS : rand() % NS;
             memcpy(idx1, idx0, sizeof idx0); memcpy(idx2, idx0, sizeof idx0);
             memset(o1, 0, sizeof o1); memset(o2, 0, sizeof o2);
-            sse_road_rows(o1, idx1, n, recs, mx, my, cols, NS + 8, group, ids, x, y, c, s, c * 0.01f,
+            sse_road_rows(o1, idx1, n, recs, mx, my, cols, NS + 8, group, x, y, c, s, c * 0.01f,
                           s * 0.01f, gstate, 3);
-            c_road_rows(o2, idx2, n, recs, mx, my, cols, NS + 8, group, ids, x, y, c, s, c * 0.01f,
+            c_road_rows(o2, idx2, n, recs, mx, my, cols, NS + 8, group, x, y, c, s, c * 0.01f,
                         s * 0.01f, gstate, 3);
             if (memcmp(o1, o2, n * 8 * 4) || memcmp(idx1, idx2, n * 4)) bad++;
             n = rand() % 64;

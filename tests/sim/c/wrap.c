@@ -6,9 +6,9 @@
 #include "near.h"
 int NAME(init)(int level) { return spd_scan_init(level); }
 void NAME(road_rows)(float *o, int32_t *idx, int n, const float *recs, const float *mx, const float *my,
-                     const float *cols, ptrdiff_t stride, const int32_t *group, const int32_t *id, float x,
+                     const float *cols, ptrdiff_t stride, const int32_t *group, float x,
                      float y, float c, float s, float cp, float sp, const int8_t *gstate, int G) {
-    spd_road_cols rc = {mx, my, cols, stride, group, id};
+    spd_road_cols rc = {mx, my, cols, stride, group};
     spd_road_rows(o, idx, n, recs, &rc, x, y, c, s, cp, sp, gstate, G);
 }
 void NAME(obj_rows)(float *o, const int32_t *cand, int n, const float *table, float x, float y, float c,
