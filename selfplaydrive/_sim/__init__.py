@@ -1,15 +1,20 @@
 """Private Cython kernels: nogil, struct-of-arrays, parallel over worlds. Not a public API.
 
-OpenMP threads wait passively (sleep) between parallel regions unless the user chose a policy:
-the default GNU policy spins for a while after every step, and a spinning worker steals the
-core that Python (action sampling, the trainer) needs between steps, which made 2 threads
-slower than 1 on 2 cores. The variable must be set before libgomp initialises, that is before
-the first kernel module is imported; `OMP_WAIT_POLICY=active` in the environment overrides it.
+OpenMP threads spin briefly, then sleep, between parallel regions unless the user chose a
+policy: GNU libgomp's default spins ~300,000 rounds (milliseconds) after every step, and a
+worker spinning that long steals the core that Python (action sampling, the trainer) needs
+between steps, which made 2 threads slower than 1 on 2 cores; sleeping at once
+(`OMP_WAIT_POLICY=passive`) costs a wake-up per step instead (2 threads gave 0.81-0.91M
+agent-steps/s in `selfplaydrive bench`, against 0.95-1.06M with 20,000 rounds, about half a
+millisecond: docs/benchmarks.md). The variables must be set before libgomp initialises, that
+is before the first kernel module is imported; `OMP_WAIT_POLICY` or `GOMP_SPINCOUNT` in the
+environment override the default.
 """
 
 import os
 
-os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+if "OMP_WAIT_POLICY" not in os.environ:
+    os.environ.setdefault("GOMP_SPINCOUNT", "20000")
 
 SIMD_NAMES = ("c", "sse2", "avx2")
 
