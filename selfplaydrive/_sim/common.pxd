@@ -92,26 +92,19 @@ cdef enum:
 
 ctypedef struct Atlas:
     # Read-only road data of every map of the env, concatenated (sim/atlas.py). Segment arrays
-    # are in atlas order (per map, sorted by grid cell); seg_id / seg_pos convert to and from
-    # the global segment index (`Sim.road_idx` holds atlas positions).
+    # are in atlas order (per map, sorted by grid cell); seg_id gives the global segment index
+    # of an atlas position (`Sim.road_idx` holds atlas positions).
     int num_maps             # number of maps
     int num_segments         # Ns, segments of all maps
-    const float* seg_start   # (Ns, 2) [m] segment first endpoint, local frame of its map
-    const float* seg_end     # (Ns, 2) [m] second endpoint
-    const float* seg_mid     # (Ns, 2) [m] midpoint
-    const float* seg_mx      # (Ns + 8,) [m] midpoint x (a copy of seg_mid[:, 0] for contiguous
+    const float* seg_mx      # (Ns + 8,) [m] midpoint x (the records' lane 0 again, for contiguous
                              # scans; the SIMD kernels read whole vectors, hence the padding)
     const float* seg_my      # (Ns + 8,) [m] midpoint y
     const int32_t* seg_id    # (Ns + 8,) global segment index of each atlas position
-    const int32_t* seg_pos   # (Ns,) atlas position of each global segment index
     const float* seg_rec     # (Ns, 8) packed record of the road events and rows: mid x, mid
                              # y, dir x, dir y, min(length / length_scale, 1), type / 4,
                              # length [m], signal group (-1: none) (_sim/rows.h, road.pyx)
     const float* seg_cols    # (4, Ns + 8) record lanes 2-5 as columns: dir x, dir y, scaled
                              # length, type / 4 (rows of consecutive segments, _sim/rows.h)
-    const float* seg_dir     # (Ns, 2) unit direction start -> end (precomputed: no trig per step)
-    const float* seg_len     # (Ns,) [m] length
-    const int8_t* seg_type   # (Ns,) SEG_* type
     const int32_t* seg_group # (Ns + 8,) signal group of a traffic-light segment, -1 otherwise
     const float* grid_origin # (M, 2) [m] lower-left corner of each map's grid
     const float* grid_cell   # (M,) [m] cell edge of each map's grid

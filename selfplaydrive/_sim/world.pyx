@@ -149,17 +149,17 @@ cdef class World:
         cdef list k = self.keep
         f4, i1, i4, i8 = np.float32, np.int8, np.int32, np.int64
         self.atlas.num_maps = len(a["grid_cell"])
-        self.atlas.num_segments = len(a["seg_len"])
-        if a["seg_cols"].shape != (4, len(a["seg_len"]) + 8):
-            raise ValueError(f"atlas seg_cols: expected shape (4, Ns + 8), got {a['seg_cols'].shape}")
-        self.atlas.seg_start = <float*>ptr(a, "seg_start", f4, k); self.atlas.seg_end = <float*>ptr(a, "seg_end", f4, k)
-        self.atlas.seg_mid = <float*>ptr(a, "seg_mid", f4, k); self.atlas.seg_dir = <float*>ptr(a, "seg_dir", f4, k)
-        self.atlas.seg_len = <float*>ptr(a, "seg_len", f4, k); self.atlas.seg_type = <int8_t*>ptr(a, "seg_type", i1, k)
+        ns = len(a["seg_rec"])
+        self.atlas.num_segments = ns
+        for name, shape in (("seg_rec", (ns, 8)), ("seg_cols", (4, ns + 8)), ("seg_mx", (ns + 8,)),
+                            ("seg_my", (ns + 8,)), ("seg_id", (ns + 8,)), ("seg_group", (ns + 8,))):
+            if a[name].shape != shape:
+                raise ValueError(f"atlas {name}: expected shape {shape}, got {a[name].shape}")
         self.atlas.seg_group = <int32_t*>ptr(a, "seg_group", i4, k)
         self.atlas.seg_mx = <float*>ptr(a, "seg_mx", f4, k); self.atlas.seg_my = <float*>ptr(a, "seg_my", f4, k)
         self.atlas.seg_rec = <float*>ptr(a, "seg_rec", f4, k)
         self.atlas.seg_cols = <float*>ptr(a, "seg_cols", f4, k)
-        self.atlas.seg_id = <int32_t*>ptr(a, "seg_id", i4, k); self.atlas.seg_pos = <int32_t*>ptr(a, "seg_pos", i4, k)
+        self.atlas.seg_id = <int32_t*>ptr(a, "seg_id", i4, k)
         self.atlas.grid_origin = <float*>ptr(a, "grid_origin", f4, k); self.atlas.grid_cell = <float*>ptr(a, "grid_cell", f4, k)
         self.atlas.grid_nx = <int32_t*>ptr(a, "grid_nx", i4, k); self.atlas.grid_ny = <int32_t*>ptr(a, "grid_ny", i4, k)
         self.atlas.cell_base = <int64_t*>ptr(a, "cell_base", i8, k)

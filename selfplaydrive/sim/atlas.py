@@ -66,7 +66,7 @@ def build_atlas(
     uniform grid of `cell_size` [m] (x-major), so the road gather reads the midpoints of each
     grid column's cells as one contiguous run. `seg_id` maps an atlas position to the
     segment's global index (map m's segment j has global index j + number of segments of maps
-    before m), `seg_pos` is its inverse. Arrays the SIMD kernels read whole vectors of
+    before m). Arrays the SIMD kernels read whole vectors of
     (`seg_mx`, `seg_my`, `seg_cols`, `seg_id`, `seg_group`) carry 8 entries of padding.
 
     Args:
@@ -83,14 +83,12 @@ def build_atlas(
         raise ValueError(f"cell_size: expected a positive number of metres, got {cell_size!r}")
     seg_base, cell_base = 0, 0
     parts: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("start", "end", "mid", "dir", "len", "type", "group", "offsets", "id")
+        k: [] for k in ("mid", "dir", "len", "type", "group", "offsets", "id")
     }
     origin, nx, ny, bases, max_len = [], [], [], [], []
     for m in maps:
         s = m.segments
         order, org, mx, my, offsets = _cell_order(np.asarray(s.mid, dtype=np.float32), cell_size)
-        parts["start"].append(s.start[order])
-        parts["end"].append(s.end[order])
         parts["mid"].append(s.mid[order])
         parts["dir"].append(s.dir[order])
         parts["len"].append(s.length[order])
@@ -110,8 +108,6 @@ def build_atlas(
     f4 = np.float32
     mid = np.ascontiguousarray(np.concatenate(parts["mid"]), dtype=f4)
     seg_id = np.concatenate(parts["id"]).astype(np.int32)
-    seg_pos = np.empty_like(seg_id)
-    seg_pos[seg_id] = np.arange(len(seg_id), dtype=np.int32)
     seg_dir = np.ascontiguousarray(np.concatenate(parts["dir"]), dtype=f4)
     seg_len = np.ascontiguousarray(np.concatenate(parts["len"]), dtype=f4)
     seg_type = np.ascontiguousarray(np.concatenate(parts["type"]), dtype=np.int8)
@@ -139,20 +135,13 @@ def build_atlas(
     cols = np.zeros((4, len(seg_id) + pad), dtype=f4)
     cols[:, : len(seg_id)] = rec[:, 2:6].T
     return {
-        "seg_start": np.ascontiguousarray(np.concatenate(parts["start"]), dtype=f4),
-        "seg_end": np.ascontiguousarray(np.concatenate(parts["end"]), dtype=f4),
-        "seg_mid": mid,
         # 8 floats of padding: the SIMD scan reads whole vectors past a run (_sim/scan.h)
         "seg_mx": np.concatenate([mid[:, 0], np.zeros(8, f4)]),
         "seg_my": np.concatenate([mid[:, 1], np.zeros(8, f4)]),
-        "seg_dir": seg_dir,
-        "seg_len": seg_len,
-        "seg_type": seg_type,
         "seg_rec": rec,
         "seg_cols": cols,
         "seg_group": np.concatenate([seg_group, np.full(pad, -1, np.int32)]),
         "seg_id": np.concatenate([seg_id, np.zeros(pad, np.int32)]),
-        "seg_pos": seg_pos,
         "grid_origin": np.ascontiguousarray(np.stack(origin), dtype=f4),
         "grid_cell": np.full(len(maps), cell_size, dtype=f4),
         "grid_nx": np.asarray(nx, dtype=np.int32),
