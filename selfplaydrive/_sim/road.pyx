@@ -133,7 +133,7 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
     does not fit (never with a valid bound); the caller then takes the separate passes."""
     cdef int m = sim.map_id[w], nx = atlas.grid_nx[m], ny = atlas.grid_ny[m], ix, y0, y1
     cdef int ni = 0, ns = 0, ne = 0, cap = sim.cand_cap, q = sim.cand_cap // 4
-    cdef int maxr = sim.max_road, a, b, keep, t, nc = 0, total = 0
+    cdef int maxr = sim.max_road, a, b, nc = 0, total = 0
     cdef int32_t cols[3 * COLS]
     cdef int32_t* col
     cdef const int32_t* offs = atlas.cell_offsets + atlas.cell_base[m]
@@ -150,7 +150,6 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
     cdef float* shell_d = cd + 2 * q
     cdef int scap = cap - 2 * q
     cdef int32_t* out = &sim.road_idx[<int64_t>i * maxr]
-    cdef float big = 0.0
     if ilo > ihi:
         ilo = ihi
     inv = 1.0 / cell
@@ -190,17 +189,7 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
         return -1
     road_events(sim, atlas, prm, w, i, evl, evl_d, ne, near2, lane_far2, box_r, step)
     memcpy(out, inner, ni * sizeof(int32_t))
-    keep = min(ni + ns, maxr)
-    b = keep - ni
-    if b < ns:
-        # ties by global index, looked up only on a tie
-        select_nearest_binned(shell_d, shell, ns, b, max(lo * lo, 0.0), hi * hi, atlas.seg_id)
-    for t in range(b):
-        out[ni + t] = shell[t]
-        big = shell_d[t] if shell_d[t] > big else big
-    # with max_road kept at least one comes from the shell, whose entries are the farthest
-    dmax2[0] = big
-    return keep
+    return append_shell(atlas, out, ni, shell, shell_d, ns, maxr, max(lo * lo, 0.0), hi * hi, dmax2)
 
 
 cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo, float hi,
@@ -210,12 +199,11 @@ cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo,
     (< lo: kept) and shell (selected). Returns the count kept, or -1 when the inner part
     does not fit (never with a valid bound; the caller then falls back to the ring search)."""
     cdef int m = sim.map_id[w], nx = atlas.grid_nx[m], ny = atlas.grid_ny[m], ix, lo_y, hi_y
-    cdef int ni = 0, ns = 0, half = sim.cand_cap // 2, maxr = sim.max_road, cnt, a, b, keep, t
+    cdef int ni = 0, ns = 0, half = sim.cand_cap // 2, maxr = sim.max_road, cnt, a
     cdef const int32_t* offs = atlas.cell_offsets + atlas.cell_base[m]
     cdef float x = sim.x[i], y = sim.y[i], cell = atlas.grid_cell[m], inv, gx, gy, gr, dx, h
     cdef int32_t ilo = spd_fbits(lo * lo) if lo > 0.0 else -1, ihi = spd_fbits(hi * hi)
     cdef int32_t* out = &sim.road_idx[<int64_t>i * maxr]
-    cdef float big = 0.0
     if ilo > ihi:
         ilo = ihi
     inv = 1.0 / cell
@@ -240,17 +228,8 @@ cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo,
     if ni >= maxr:
         return -1
     memcpy(out, cand, ni * sizeof(int32_t))
-    keep = min(ni + ns, maxr)
-    b = keep - ni
-    if b < ns:
-        # ties by global index, looked up only on a tie
-        select_nearest_binned(cd + half, cand + half, ns, b, max(lo * lo, 0.0), hi * hi, atlas.seg_id)
-    for t in range(b):
-        out[ni + t] = cand[half + t]
-        big = cd[half + t] if cd[half + t] > big else big
-    # with max_road kept at least one comes from the shell, whose entries are the farthest
-    dmax2[0] = big
-    return keep
+    return append_shell(atlas, out, ni, cand + half, cd + half, ns, maxr, max(lo * lo, 0.0),
+                        hi * hi, dmax2)
 
 
 cdef int nearest_by_rings(Sim* sim, const Atlas* atlas, const Params* prm, int w, int i,
@@ -466,8 +445,8 @@ cdef int keep_nearest(const Atlas* atlas, int32_t* cand, float* cd, int n, int m
     without sorting (the observation does not sort road segments); only the shell (lo2, hi2]
     is partially sorted. Scratch (cand, cd) is reused in place. `dmax2` receives the largest
     kept squared distance when maxr are kept."""
-    cdef int t, o = 0, nb = 0, keep, p
-    cdef float d, big = 0.0
+    cdef int t, o = 0, nb = 0, p
+    cdef float d
     if lo2 > hi2:
         lo2 = hi2
     if count_within(cd, n, lo2) >= maxr:
@@ -481,14 +460,24 @@ cdef int keep_nearest(const Atlas* atlas, int32_t* cand, float* cd, int n, int m
         cand[nb] = p
         cd[nb] = d
         nb += (d > lo2) & (d <= hi2)
-    keep = min(o + nb, maxr)
-    if keep - o < nb:
+    return append_shell(atlas, out, o, cand, cd, nb, maxr, max(lo2, 0.0), hi2, dmax2)
+
+
+cdef inline int append_shell(const Atlas* atlas, int32_t* out, int ni, int32_t* shell,
+                             float* shell_d, int ns, int maxr, float lo2, float hi2,
+                             float* dmax2) noexcept nogil:
+    """After the ni inner candidates in `out`, append the nearest of the ns shell candidates
+    (squared distances in [lo2, hi2]) up to maxr in all; returns the count kept. `dmax2`
+    receives the largest appended squared distance: with maxr kept at least one comes from
+    the shell, whose entries are the farthest."""
+    cdef int t, keep = min(ni + ns, maxr), b = keep - ni
+    cdef float big = 0.0
+    if b < ns:
         # ties by global index, looked up only on a tie
-        select_nearest_binned(cd, cand, nb, keep - o, max(lo2, 0.0), hi2, atlas.seg_id)
-    for t in range(keep - o):
-        out[o + t] = cand[t]
-        big = cd[t] if cd[t] > big else big
-    # with maxr kept, at least one comes from the shell, and shell entries are the farthest
+        select_nearest_binned(shell_d, shell, ns, b, lo2, hi2, atlas.seg_id)
+    for t in range(b):
+        out[ni + t] = shell[t]
+        big = shell_d[t] if shell_d[t] > big else big
     dmax2[0] = big
     return keep
 
