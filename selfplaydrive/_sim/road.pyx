@@ -170,7 +170,7 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
         a = offs[ix * ny + y0]
         b = offs[ix * ny + y1 + 1]
         total += b - a
-        if total + 7 > q or total > scap:
+        if total + 7 > q or total + 7 > scap:
             return -1  # the scratch parts could overflow
         col = &cols[3 * nc]
         col[0] = a

@@ -27,8 +27,8 @@ static inline int32_t spd_fbits(float f) {
 /* Arguments of every version, for one run [lo, lo + cnt) of atlas positions against (x, y):
  * ilo: bits of the inner bound (-1: no inner), ihi >= ilo: bits of the outer bound,
  * iev: bits of the events bound (used when with_ev).
- * inner[*ni...], ev[*ne...] and ev_d[*ne...] need room for cnt + 7 more entries (the packed
- * stores write whole vectors), shell[*ns...] and shell_d[*ns...] for cnt more. ev_d gets the
+ * inner[*ni...], shell[*ns...], shell_d[*ns...], ev[*ne...] and ev_d[*ne...] need room for
+ * cnt + 7 more entries (the packed stores write whole vectors). ev_d gets the
  * squared distance of each ev entry (the same float as the split used). */
 
 SPD_ALWAYS_INLINE void spd_scan_c(
@@ -156,6 +156,35 @@ static inline void spd_scan_tables(void) {
     }
 }
 
+/* Eight candidates at lanes t..t+7 of the run; `valid` masks lanes past its end. Every list
+ * gets a whole-vector store of the packed lanes (positions, and distances by a lane
+ * permutation), so there is no branch per candidate: a thin shell sets a lane in about one
+ * vector in seven, a branch there was mispredicted often. */
+SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan8_avx2(
+    __m256 d8, __m256i pos, int valid, __m256i lo1, __m256i sgn, __m256i wid, __m256i ev1,
+    int32_t *restrict inner, ptrdiff_t *a, int32_t *restrict shell, float *restrict shell_d,
+    ptrdiff_t *b, int32_t *restrict ev, float *restrict ev_d, ptrdiff_t *e, const int with_ev) {
+    __m256i di = _mm256_castps_si256(d8), lane;
+    int mi = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(lo1, di))) & valid;
+    int ms = _mm256_movemask_ps(_mm256_castsi256_ps(
+                 _mm256_cmpgt_epi32(wid, _mm256_xor_si256(_mm256_sub_epi32(di, lo1), sgn)))) &
+             valid;
+    lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[mi]));
+    _mm256_storeu_si256((__m256i *)(inner + *a), _mm256_add_epi32(pos, lane));
+    *a += spd_pop8[mi];
+    lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[ms]));
+    _mm256_storeu_si256((__m256i *)(shell + *b), _mm256_add_epi32(pos, lane));
+    _mm256_storeu_ps(shell_d + *b, _mm256_permutevar8x32_ps(d8, lane));
+    *b += spd_pop8[ms];
+    if (with_ev) {
+        int me = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ev1, di))) & valid;
+        lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[me]));
+        _mm256_storeu_si256((__m256i *)(ev + *e), _mm256_add_epi32(pos, lane));
+        _mm256_storeu_ps(ev_d + *e, _mm256_permutevar8x32_ps(d8, lane));
+        *e += spd_pop8[me];
+    }
+}
+
 SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
     const float *restrict mx, const float *restrict my, int lo, int cnt, float x, float y,
     int32_t ilo, int32_t ihi, int32_t iev, int32_t *restrict inner, int *ni,
@@ -174,41 +203,10 @@ SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
         __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px + t), vx);
         __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py + t), vy);
         __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
-        __m256i di = _mm256_castps_si256(d8);
-        int mi = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(lo1, di)));
-        int ms = _mm256_movemask_ps(_mm256_castsi256_ps(
-            _mm256_cmpgt_epi32(wid, _mm256_xor_si256(_mm256_sub_epi32(di, lo1), sgn))));
-        int me = with_ev ? _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ev1, di)))
-                         : 0;
-        if (cnt - t < 8) {
-            int valid = (1 << (cnt - t)) - 1; /* lanes past the run */
-            mi &= valid;
-            ms &= valid;
-            me &= valid;
-        }
-        _mm256_storeu_si256(
-            (__m256i *)(inner + a),
-            _mm256_add_epi32(pos, _mm256_cvtepu8_epi32(
-                                      _mm_loadl_epi64((const __m128i *)spd_pack8[mi]))));
-        a += spd_pop8[mi];
-        if (with_ev) {
-            __m256i lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[me]));
-            _mm256_storeu_si256((__m256i *)(ev + e), _mm256_add_epi32(pos, lane));
-            _mm256_storeu_ps(ev_d + e, _mm256_permutevar8x32_ps(d8, lane));
-            e += spd_pop8[me];
-        }
-        if (ms) {
-            float dv[8];
-            int j;
-            _mm256_storeu_ps(dv, d8);
-            for (j = 0; j < 8; j++) {
-                if (ms >> j & 1) {
-                    shell[b] = lo + (int32_t)t + j;
-                    shell_d[b] = dv[j];
-                    b++;
-                }
-            }
-        }
+        /* lanes past the run only in the last vector: a shift, no branch (cnt - t > 0) */
+        int valid = (int)(0xFFu >> (8 - (cnt - t < 8 ? cnt - t : 8)));
+        spd_scan8_avx2(d8, pos, valid, lo1, sgn, wid, ev1, inner, &a, shell, shell_d, &b, ev,
+                       ev_d, &e, with_ev);
         pos = _mm256_add_epi32(pos, eight);
     }
     *ni = (int)a;
