@@ -259,12 +259,47 @@ static inline SPD_AVX2 void spd_tr8(__m256 *r) {
     r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
+/* light states of rows r[0 .. n) (cold: a block with a traffic-light line) */
+static __attribute__((noinline, cold)) void spd_road_lights(float *r, const int32_t *ip, int n,
+                                                            const float *recs,
+                                                            const int8_t *gstate, int G) {
+    int j;
+    for (j = 0; j < n; j++)
+        spd_road_light(r + 8 * j, recs + ((ptrdiff_t)ip[j] << 3), gstate, G);
+}
+
+/* rows k and k + 1 of the records at qa and qb (see spd_road_rows_avx2); returns the high
+ * halves, whose lane 7 (the signal group) says whether a row needs its light state */
+SPD_ALWAYS_INLINE SPD_AVX2 __m256 spd_road_pair_avx2(float *r, const float *qa, const float *qb,
+                                                     __m256 XY, __m256 M1, __m256 M2,
+                                                     __m256 one, __m256 neg, __m256 zero) {
+    __m256 lo4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa)),
+                                      _mm_loadu_ps(qb), 1);
+    __m256 hi4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa + 4)),
+                                      _mm_loadu_ps(qb + 4), 1);
+    __m256 u = _mm256_sub_ps(lo4, XY);          /* ux, uy, dir x, dir y (two rows) */
+    __m256 w = _mm256_permute_ps(u, 0xB1);      /* uy, ux, dir y, dir x */
+    __m256 v = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(u, M1), _mm256_mul_ps(w, M2)));
+    /* (1, dx, dy, cos) and (sin, length, type, 0) per row */
+    __m256 a = _mm256_castsi256_ps(
+        _mm256_alignr_epi8(_mm256_castps_si256(v), _mm256_castps_si256(one), 12));
+    __m256 b = _mm256_blend_ps(
+        _mm256_castsi256_ps(
+            _mm256_alignr_epi8(_mm256_castps_si256(hi4), _mm256_castps_si256(v), 12)),
+        zero, 0x88);
+    _mm256_storeu_ps(r, _mm256_permute2f128_ps(a, b, 0x20));
+    _mm256_storeu_ps(r + 8, _mm256_permute2f128_ps(a, b, 0x31));
+    return hi4;
+}
+
 /* Two rows per vector, no transposes: the rotated pairs (mid x, mid y) and (dir x, dir y) sit
  * in the low half of a record, so both rows' low halves share one vector and the rotation is
  * u * (cp, cp, c, c) + swap(u) * (sp, -sp, s, -s), with swap an in-lane shuffle; byte shifts
  * then slide the results one float to the right behind the constant 1 and in front of
  * (length, type) from the high halves. The products and sums are the plain-C row's, so the
- * rows are bit-identical. (An 8 x 8 transpose in and out took twice the shuffles.) */
+ * rows are bit-identical. (An 8 x 8 transpose in and out took twice the shuffles.) Four rows
+ * per iteration share the loop overhead and one light test: the group lanes of both high
+ * halves are ANDed (a light line has a group >= 0, sign bit clear). */
 static SPD_AVX2 int spd_road_rows_avx2(float *o, const int32_t *idx, int n, const float *recs,
                                        const spd_road_cols *rc, float x, float y, float c,
                                        float s, float cp, float sp, const int8_t *gstate,
@@ -276,31 +311,23 @@ static SPD_AVX2 int spd_road_rows_avx2(float *o, const int32_t *idx, int n, cons
     const __m256 zero = _mm256_setzero_ps();
     const int32_t *ip = idx;
     float *r = o;
-    int k = 0;
+    int k = 0, j;
     (void)rc;
-    for (; k + 2 <= n; k += 2, ip += 2, r += 16) {
-        const float *qa = recs + ((ptrdiff_t)ip[0] << 3), *qb = recs + ((ptrdiff_t)ip[1] << 3);
-        __m256 lo4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa)),
-                                          _mm_loadu_ps(qb), 1);
-        __m256 hi4 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(qa + 4)),
-                                          _mm_loadu_ps(qb + 4), 1);
-        __m256 u = _mm256_sub_ps(lo4, XY);          /* ux, uy, dir x, dir y (two rows) */
-        __m256 w = _mm256_permute_ps(u, 0xB1);      /* uy, ux, dir y, dir x */
-        __m256 v = SPD_CLIP8(_mm256_add_ps(_mm256_mul_ps(u, M1), _mm256_mul_ps(w, M2)));
-        /* (1, dx, dy, cos) and (sin, length, type, 0) per row */
-        __m256 a = _mm256_castsi256_ps(
-            _mm256_alignr_epi8(_mm256_castps_si256(v), _mm256_castps_si256(one), 12));
-        __m256 b = _mm256_blend_ps(
-            _mm256_castsi256_ps(_mm256_alignr_epi8(_mm256_castps_si256(hi4),
-                                                   _mm256_castps_si256(v), 12)),
-            zero, 0x88);
-        _mm256_storeu_ps(r, _mm256_permute2f128_ps(a, b, 0x20));
-        _mm256_storeu_ps(r + 8, _mm256_permute2f128_ps(a, b, 0x31));
+    for (; k + 4 <= n; k += 4, ip += 4, r += 32) {
+        int32_t i0 = ip[0], i1 = ip[1], i2 = ip[2], i3 = ip[3];
+        __m256 h0 = spd_road_pair_avx2(r, recs + ((ptrdiff_t)i0 << 3), recs + ((ptrdiff_t)i1 << 3),
+                                       XY, M1, M2, one, neg, zero);
+        __m256 h1 = spd_road_pair_avx2(r + 16, recs + ((ptrdiff_t)i2 << 3),
+                                       recs + ((ptrdiff_t)i3 << 3), XY, M1, M2, one, neg, zero);
         /* the group (lane 7 of each record) is -1 except on traffic-light lines */
-        if (__builtin_expect((_mm256_movemask_ps(hi4) & 0x88) != 0x88, 0)) {
-            spd_road_light(r, qa, gstate, G);
-            spd_road_light(r + 8, qb, gstate, G);
-        }
+        if (__builtin_expect((_mm256_movemask_ps(_mm256_and_ps(h0, h1)) & 0x88) != 0x88, 0))
+            spd_road_lights(r, ip, 4, recs, gstate, G);
+    }
+    for (; k + 2 <= n; k += 2, ip += 2, r += 16) {
+        __m256 h = spd_road_pair_avx2(r, recs + ((ptrdiff_t)ip[0] << 3),
+                                      recs + ((ptrdiff_t)ip[1] << 3), XY, M1, M2, one, neg, zero);
+        if (__builtin_expect((_mm256_movemask_ps(h) & 0x88) != 0x88, 0))
+            spd_road_lights(r, ip, 2, recs, gstate, G);
     }
     return k;
 }
