@@ -199,15 +199,22 @@ SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
     const __m256i wid = _mm256_set1_epi32((int32_t)(width ^ 0x80000000u));
     const __m256i eight = _mm256_set1_epi32(8);
     __m256i pos = _mm256_set1_epi32(lo);
-    for (t = 0; t < cnt; t += 8) {
+    /* whole vectors, then the last one with the lanes past the run masked out (a run ends
+     * inside a vector 7 times in 8, so that branch is predicted well) */
+    for (t = 0; t + 8 <= cnt; t += 8) {
         __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px + t), vx);
         __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py + t), vy);
         __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
-        /* lanes past the run only in the last vector: a shift, no branch (cnt - t > 0) */
-        int valid = (int)(0xFFu >> (8 - (cnt - t < 8 ? cnt - t : 8)));
-        spd_scan8_avx2(d8, pos, valid, lo1, sgn, wid, ev1, inner, &a, shell, shell_d, &b, ev,
+        spd_scan8_avx2(d8, pos, 0xFF, lo1, sgn, wid, ev1, inner, &a, shell, shell_d, &b, ev,
                        ev_d, &e, with_ev);
         pos = _mm256_add_epi32(pos, eight);
+    }
+    if (t < cnt) {
+        __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px + t), vx);
+        __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py + t), vy);
+        __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
+        spd_scan8_avx2(d8, pos, (1 << (cnt - t)) - 1, lo1, sgn, wid, ev1, inner, &a, shell,
+                       shell_d, &b, ev, ev_d, &e, with_ev);
     }
     *ni = (int)a;
     *ns = (int)b;
