@@ -265,7 +265,7 @@ static __attribute__((noinline, cold)) void spd_road_lights(float *r, const int3
                                                             const int8_t *gstate, int G) {
     int j;
     for (j = 0; j < n; j++)
-        spd_road_light(r + 8 * j, recs + ((ptrdiff_t)ip[j] << 3), gstate, G);
+        spd_road_light(r + 8 * j, recs + 8 * (ptrdiff_t)ip[j], gstate, G);
 }
 
 /* rows k and k + 1 of the records at qa and qb (see spd_road_rows_avx2); returns the high
@@ -311,21 +311,20 @@ static SPD_AVX2 int spd_road_rows_avx2(float *o, const int32_t *idx, int n, cons
     const __m256 zero = _mm256_setzero_ps();
     const int32_t *ip = idx;
     float *r = o;
-    int k = 0, j;
+    int k = 0;
     (void)rc;
     for (; k + 4 <= n; k += 4, ip += 4, r += 32) {
-        int32_t i0 = ip[0], i1 = ip[1], i2 = ip[2], i3 = ip[3];
-        __m256 h0 = spd_road_pair_avx2(r, recs + ((ptrdiff_t)i0 << 3), recs + ((ptrdiff_t)i1 << 3),
+        __m256 h0 = spd_road_pair_avx2(r, recs + 8 * (ptrdiff_t)ip[0], recs + 8 * (ptrdiff_t)ip[1],
                                        XY, M1, M2, one, neg, zero);
-        __m256 h1 = spd_road_pair_avx2(r + 16, recs + ((ptrdiff_t)i2 << 3),
-                                       recs + ((ptrdiff_t)i3 << 3), XY, M1, M2, one, neg, zero);
+        __m256 h1 = spd_road_pair_avx2(r + 16, recs + 8 * (ptrdiff_t)ip[2],
+                                       recs + 8 * (ptrdiff_t)ip[3], XY, M1, M2, one, neg, zero);
         /* the group (lane 7 of each record) is -1 except on traffic-light lines */
         if (__builtin_expect((_mm256_movemask_ps(_mm256_and_ps(h0, h1)) & 0x88) != 0x88, 0))
             spd_road_lights(r, ip, 4, recs, gstate, G);
     }
     for (; k + 2 <= n; k += 2, ip += 2, r += 16) {
-        __m256 h = spd_road_pair_avx2(r, recs + ((ptrdiff_t)ip[0] << 3),
-                                      recs + ((ptrdiff_t)ip[1] << 3), XY, M1, M2, one, neg, zero);
+        __m256 h = spd_road_pair_avx2(r, recs + 8 * (ptrdiff_t)ip[0], recs + 8 * (ptrdiff_t)ip[1],
+                                      XY, M1, M2, one, neg, zero);
         if (__builtin_expect((_mm256_movemask_ps(h) & 0x88) != 0x88, 0))
             spd_road_lights(r, ip, 2, recs, gstate, G);
     }

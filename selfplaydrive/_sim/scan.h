@@ -156,33 +156,39 @@ static inline void spd_scan_tables(void) {
     }
 }
 
-/* Eight candidates at lanes t..t+7 of the run; `valid` masks lanes past its end. Every list
- * gets a whole-vector store of the packed lanes (positions, and distances by a lane
- * permutation), so there is no branch per candidate: a thin shell sets a lane in about one
- * vector in seven, a branch there was mispredicted often. */
+/* Append the positions pos + (lanes of mask m), packed to the front, at dst[*n...] (and, with
+ * the constant with_d, the same lanes of d8 at dst_d[*n...]); one whole-vector store each. */
+SPD_ALWAYS_INLINE SPD_AVX2 void spd_put8(int32_t *restrict dst, float *restrict dst_d,
+                                         ptrdiff_t *n, __m256i pos, __m256 d8, int m,
+                                         const int with_d) {
+    __m256i lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[m]));
+    _mm256_storeu_si256((__m256i *)(dst + *n), _mm256_add_epi32(pos, lane));
+    if (with_d)
+        _mm256_storeu_ps(dst_d + *n, _mm256_permutevar8x32_ps(d8, lane));
+    *n += spd_pop8[m];
+}
+
+/* Eight candidates from px, py (positions pos ...); `valid` masks lanes past the run. Every
+ * list gets a whole-vector store of the packed lanes, so there is no branch per candidate: a
+ * thin shell sets a lane in about one vector in seven, a branch there was mispredicted often. */
 SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan8_avx2(
-    __m256 d8, __m256i pos, int valid, __m256i lo1, __m256i sgn, __m256i wid, __m256i ev1,
-    int32_t *restrict inner, ptrdiff_t *a, int32_t *restrict shell, float *restrict shell_d,
-    ptrdiff_t *b, int32_t *restrict ev, float *restrict ev_d, ptrdiff_t *e, const int with_ev) {
-    __m256i di = _mm256_castps_si256(d8), lane;
+    const float *px, const float *py, __m256 vx, __m256 vy, __m256i pos, int valid,
+    __m256i lo1, __m256i sgn, __m256i wid, __m256i ev1, int32_t *restrict inner, ptrdiff_t *a,
+    int32_t *restrict shell, float *restrict shell_d, ptrdiff_t *b, int32_t *restrict ev,
+    float *restrict ev_d, ptrdiff_t *e, const int with_ev) {
+    __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px), vx);
+    __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py), vy);
+    __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
+    __m256i di = _mm256_castps_si256(d8);
     int mi = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(lo1, di))) & valid;
     int ms = _mm256_movemask_ps(_mm256_castsi256_ps(
                  _mm256_cmpgt_epi32(wid, _mm256_xor_si256(_mm256_sub_epi32(di, lo1), sgn)))) &
              valid;
-    lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[mi]));
-    _mm256_storeu_si256((__m256i *)(inner + *a), _mm256_add_epi32(pos, lane));
-    *a += spd_pop8[mi];
-    lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[ms]));
-    _mm256_storeu_si256((__m256i *)(shell + *b), _mm256_add_epi32(pos, lane));
-    _mm256_storeu_ps(shell_d + *b, _mm256_permutevar8x32_ps(d8, lane));
-    *b += spd_pop8[ms];
-    if (with_ev) {
-        int me = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ev1, di))) & valid;
-        lane = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)spd_pack8[me]));
-        _mm256_storeu_si256((__m256i *)(ev + *e), _mm256_add_epi32(pos, lane));
-        _mm256_storeu_ps(ev_d + *e, _mm256_permutevar8x32_ps(d8, lane));
-        *e += spd_pop8[me];
-    }
+    spd_put8(inner, NULL, a, pos, d8, mi, 0);
+    spd_put8(shell, shell_d, b, pos, d8, ms, 1);
+    if (with_ev)
+        spd_put8(ev, ev_d, e, pos, d8,
+                 _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(ev1, di))) & valid, 1);
 }
 
 SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
@@ -201,21 +207,12 @@ SPD_ALWAYS_INLINE SPD_AVX2 void spd_scan_avx2(
     __m256i pos = _mm256_set1_epi32(lo);
     /* whole vectors, then the last one with the lanes past the run masked out (a run ends
      * inside a vector 7 times in 8, so that branch is predicted well) */
-    for (t = 0; t + 8 <= cnt; t += 8) {
-        __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px + t), vx);
-        __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py + t), vy);
-        __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
-        spd_scan8_avx2(d8, pos, 0xFF, lo1, sgn, wid, ev1, inner, &a, shell, shell_d, &b, ev,
-                       ev_d, &e, with_ev);
-        pos = _mm256_add_epi32(pos, eight);
-    }
-    if (t < cnt) {
-        __m256 ex = _mm256_sub_ps(_mm256_loadu_ps(px + t), vx);
-        __m256 ey = _mm256_sub_ps(_mm256_loadu_ps(py + t), vy);
-        __m256 d8 = _mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey));
-        spd_scan8_avx2(d8, pos, (1 << (cnt - t)) - 1, lo1, sgn, wid, ev1, inner, &a, shell,
+    for (t = 0; t + 8 <= cnt; t += 8, pos = _mm256_add_epi32(pos, eight))
+        spd_scan8_avx2(px + t, py + t, vx, vy, pos, 0xFF, lo1, sgn, wid, ev1, inner, &a, shell,
                        shell_d, &b, ev, ev_d, &e, with_ev);
-    }
+    if (t < cnt)
+        spd_scan8_avx2(px + t, py + t, vx, vy, pos, (1 << (cnt - t)) - 1, lo1, sgn, wid, ev1,
+                       inner, &a, shell, shell_d, &b, ev, ev_d, &e, with_ev);
     *ni = (int)a;
     *ns = (int)b;
     if (with_ev)
