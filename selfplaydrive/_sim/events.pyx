@@ -212,13 +212,20 @@ cdef void collisions_world(Sim* sim, const Params* prm, int w) noexcept nogil:
                     sim.events[i] |= EV_PED
 
 
+def collision_scratch(int A, int S, int P):
+    """Scratch floats per world that the collision pre-test writes (body_soa: x, y and radius
+    of pad4(A) agents, pad4(S) statics and pad4(P) pedestrians)."""
+    return 3 * (pad4(A) + pad4(S) + pad4(P))
+
+
 cdef void body_soa(Sim* sim, int w, float* ax, int nA, float* sx, int nS, float* qx,
                    int nP) noexcept nogil:
     """Struct-of-arrays copy of the bodies of world `w` for the pre-test: for agents (nA
     slots, padded to a multiple of 4), statics (nS) and pedestrians (nP) three arrays each,
     x, y [m] and swept radius (bounding radius + distance moved this step) [m], laid out as
     x[0:n], y[n:2n], r[2n:3n]. Bodies that take no part (empty slots, ended agents not kept,
-    vanished pedestrians, padding) get x = NaN. The scratch holds 3 (nA + nS + nP) floats."""
+    vanished pedestrians, padding) get x = NaN. The scratch holds 3 (nA + nS + nP) floats
+    (`collision_scratch`)."""
     cdef float nan = NAN
     cdef int a, k, i, A = sim.A, S = sim.S, P = sim.P
     cdef float dx, dy

@@ -99,6 +99,14 @@ cdef inline int pad4(int n) noexcept nogil:
     return (n + 3) & ~3
 
 
+def body_scratch(int A, int S, int P):
+    """Scratch entries per world that the observation stage writes (body_table: NB 8-float
+    records, NB distances, x and y of pad4(NB) floats each; write_objects: NB owners and up
+    to NB + 3 candidates), for A agents, S statics and P pedestrians (NB = A + S + P)."""
+    cdef int NB = A + S + P
+    return max(9 * NB + 2 * pad4(NB), 2 * NB + 3)
+
+
 cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner) noexcept nogil:
     """Pack the observable bodies of world `w` once per step: agents (active or obstacles),
     static vehicles, present pedestrians, in slot order, as 8-float records (x, y, cos, sin,
@@ -106,7 +114,8 @@ cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner
     of record k (-1 for other bodies). Then, after the records' slots (NB = A + S + P of
     them), NB floats of distance scratch and the record positions x and y as two arrays of
     pad4(NB) floats, padded with NaN (near.h `spd_within`). Returns the number of records.
-    The scratch holds 10 NB + 32 floats and ints (sim/buffers.py `Dims.of`)."""
+    The scratch holds `body_scratch(A, S, P)` floats; `owner` and the candidates of
+    write_objects take 2 NB + 3 ints (sim/buffers.py `Dims.of` sizes the scratch)."""
     cdef int k, j, nb = 0, A = sim.A, S = sim.S, P = sim.P, NB = sim.A + sim.S + sim.P
     cdef float* r
     cdef float* bx = t + 9 * NB

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from selfplaydrive._sim.events import collision_scratch
+from selfplaydrive._sim.observe import body_scratch
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
 
 NUM_TERMS = 8
@@ -44,13 +46,19 @@ class Dims:
             G=G,
             max_obj=max_obj,
             max_road=max_road,
-            # the observation stage keeps a body table (8 floats) and candidates in the scratch,
-            # the collision pre-test 3 floats per body (slot counts padded to multiples of 4)
+            # the collision pre-test and the observation's body table use the same per-world
+            # scratch as the road gather; the kernels report the entries they write
             cand_cap=max(
-                cand_cap, 10 * (len(sc.agent_valid) + len(sc.static_valid) + len(sc.ped_valid)) + 32
+                cand_cap, _kernel_scratch(len(sc.agent_valid), len(sc.static_valid), len(sc.ped_valid))
             ),
             obs_dim=obs_dim,
         )
+
+
+def _kernel_scratch(A: int, S: int, P: int) -> int:
+    """Scratch entries per world the collision and observation kernels need (_sim/events.pyx
+    `collision_scratch`, _sim/observe.pyx `body_scratch`)."""
+    return max(collision_scratch(A, S, P), body_scratch(A, S, P))
 
 
 def allocate(d: Dims) -> dict[str, np.ndarray]:

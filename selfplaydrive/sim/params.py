@@ -38,7 +38,8 @@ class SimParams:
         width_scale: Observation scale of widths [m].
         lateral_scale: Observation scale of the lane offset s [m].
         max_substeps: Cap on collision sub-steps per pair.
-        cand_cap: Road candidates kept per agent before selecting the nearest max_road.
+        cand_cap: Road candidates kept per agent before selecting the nearest max_road (per-world
+            scratch; raised to what the collision and observation kernels write there).
     """
 
     dt: float = 0.1

@@ -261,3 +261,37 @@ def test_road_segments_are_global_indices_of_the_road_rows():
     np.testing.assert_allclose(rows[:, 1:3], np.clip(want, -1, 1), atol=2e-5)
     with pytest.raises(IndexError):
         env.road_segments(env.num_agents)
+
+
+def test_smallest_candidate_capacity_gives_the_same_rollout():
+    """`sim.cand_cap=1` (the smallest accepted) is raised to what the collision and observation
+    kernels write into the per-world scratch, and the gather's fallbacks keep the results:
+    the rollout equals the default capacity's at 1 and 2 threads. (Regression: the scratch was
+    sized 10 NB + 32 while the body table writes 9 NB + 2 pad4(NB) entries, so with a small
+    cand_cap the last world wrote past the buffer: other results, heap corruption.)"""
+    from selfplaydrive._sim.events import collision_scratch
+    from selfplaydrive._sim.observe import body_scratch
+
+    from selfplaydrive.maps.loader import load_map
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    road_map = load_map("default")
+
+    def digest(cap: int, threads: int) -> str:
+        env = VecEnv(road_map, PaperSpawner(), 4, seed=3, num_threads=threads, params=SimParams(cand_cap=cap))
+        d = env.dims
+        assert d.cand_cap >= max(body_scratch(d.A, d.S, d.P), collision_scratch(d.A, d.S, d.P))
+        env.reset(3)
+        rng = np.random.default_rng(1)
+        h = hashlib.sha256()
+        for _ in range(100):
+            env.step(rng.integers(0, [7, 13], size=(env.num_agents, 2)))
+            for arr in (env.observations, env.rewards, env.terminations, env.state.road_n):
+                h.update(arr.tobytes())
+        return h.hexdigest()
+
+    assert body_scratch(80, 48, 8) == 9 * 136 + 2 * 136  # NB = 136: records, distances, x, y
+    assert collision_scratch(30, 1, 0) == 3 * (32 + 4 + 0)
+    want = digest(SimParams().cand_cap, 1)
+    assert digest(1, 1) == want
+    assert digest(1, 2) == want
