@@ -155,7 +155,7 @@ cdef int gather_bounded(Sim* sim, const Atlas* atlas, const Params* prm, int w, 
     inv = 1.0 / cell
     gx = clamp_cells((x - atlas.grid_origin[2 * m]) * inv)
     gy = clamp_cells((y - atlas.grid_origin[2 * m + 1]) * inv)
-    gs = S * inv
+    gs = clamp_reach(S * inv)
     ge = ev * inv
     for ix in range(max(ifloor(gx - gs), 0), min(ifloor(gx + gs), nx - 1) + 1):
         dx = max(max(ix - gx, gx - (ix + 1)), 0.0)
@@ -209,7 +209,7 @@ cdef int nearest_in_bounds(Sim* sim, const Atlas* atlas, int w, int i, float lo,
     inv = 1.0 / cell
     gx = clamp_cells((x - atlas.grid_origin[2 * m]) * inv)
     gy = clamp_cells((y - atlas.grid_origin[2 * m + 1]) * inv)
-    gr = hi * inv
+    gr = clamp_reach(hi * inv)
     for ix in range(max(<int>floor(gx - gr), 0), min(<int>floor(gx + gr), nx - 1) + 1):
         dx = max(max(ix - gx, gx - (ix + 1)), 0.0)
         h = gr * gr - dx * dx
@@ -275,7 +275,7 @@ cdef int scan_disc(const Atlas* atlas, int m, float x, float y, float rad, int32
     cdef float inv = 1.0 / cell, gx, gy, gr, dx, h
     gx = clamp_cells((x - ox) * inv)
     gy = clamp_cells((y - oy) * inv)
-    gr = rad * inv
+    gr = clamp_reach(rad * inv)
     lo_x = max(<int>floor(gx - gr), 0)
     hi_x = min(<int>floor(gx + gr), nx - 1)
     for ix in range(lo_x, hi_x + 1):
@@ -299,6 +299,14 @@ cdef inline float clamp_cells(float g) noexcept nogil:
     if g > 1048576.0:
         return 1048576.0
     return g
+
+
+cdef inline float clamp_reach(float g) noexcept nogil:
+    """A search radius in cells, at most 2^22: with the centre clamped to +-2^20 cells the
+    column and row bounds stay far inside int (a radius of 1e12 m, accepted as lane_radius or
+    obs_radius, used to overflow the conversion and scan nothing); 2^22 cells still cover
+    every grid."""
+    return g if g < 4194304.0 else 4194304.0
 
 
 cdef inline int scan_range(const Atlas* atlas, int lo, int hi, float x, float y, int32_t* cand,

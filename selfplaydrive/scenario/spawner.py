@@ -162,6 +162,13 @@ class PaperSpawner:
         ):
             if not v > 0:
                 raise ConfigError(f"PaperSpawner.{name} must be positive, got {v}")
+        if region_stride > region_size:
+            # centres are jittered by +-stride/2 and lane lengths summed on stride/2 bins: a
+            # coarser lattice than the region moves regions off the lanes that qualified them
+            raise ConfigError(
+                f"PaperSpawner.region_stride must not exceed region_size, got "
+                f"region_stride={region_stride} m and region_size={region_size} m"
+            )
         if not 0 <= initial_speed[0] <= initial_speed[1]:
             raise ConfigError(
                 f"PaperSpawner.initial_speed must satisfy 0 <= low <= high [m/s], got {initial_speed}"

@@ -132,6 +132,8 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
         got = np.shape(getattr(sc, name))
         if got != shape:
             raise ValueError(f"scenario.{name}: expected shape {shape} (the env's slot counts), got {got}")
+    _check_counts(sc, d)
+    _check_bodies(sc)
     if not 0 <= sc.map_index < num_maps:
         raise ValueError(f"scenario.map_index: expected an index in [0, {num_maps}), got {sc.map_index}")
     if len(sc.light_state) > d.G:
@@ -142,6 +144,75 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
         raise ValueError(
             f"scenario.episode_length: expected a positive number of seconds, got {sc.episode_length}"
         )
+
+
+def _check_counts(sc: Scenario, d: Dims) -> None:
+    """The kernels index waypoints[i, :num_waypoints] and ped_path[k, :ped_num_points] without
+    bounds checks: a count past the slot size would read past the row (and past the buffer in
+    the last world), so it is refused here, as are non-finite points within the counts."""
+    for name, points, valid, cap, what in (
+        ("num_waypoints", "waypoints", sc.agent_valid, d.K, "max_waypoints"),
+        ("ped_num_points", "ped_path", sc.ped_valid, d.T, "path points"),
+    ):
+        slots = np.flatnonzero(np.asarray(valid, dtype=bool))
+        n = np.asarray(getattr(sc, name))[slots]
+        if n.size and not (n.min() >= 0 and n.max() <= cap):
+            k = int(np.flatnonzero((n < 0) | (n > cap))[0])
+            raise ValueError(
+                f"scenario.{name}: expected counts in [0, {cap}] ({what}) for valid slots, got {int(n[k])} "
+                f"in slot {int(slots[k])}"
+            )
+        pts = np.asarray(getattr(sc, points), dtype=np.float64)
+        if np.isfinite(pts).all():
+            continue  # the common case: no search for the first bad point
+        used = np.arange(cap)[None, :] < n[:, None]
+        pts = pts[slots]
+        bad = (used & ~np.isfinite(pts).all(axis=-1)).any(axis=1)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"scenario.{points}: expected finite points [m] within the first {name} of each valid "
+                f"slot, got {pts[k][used[k]].tolist()} in slot {int(slots[k])}"
+            )
+
+
+_BODY_FIELDS = (
+    (
+        "agent",
+        "agent_valid",
+        ("agent_xy", "agent_heading", "agent_speed", "coeffs", "hidden"),
+        ("agent_length", "agent_width"),
+    ),
+    ("static", "static_valid", ("static_xy", "static_heading"), ("static_length", "static_width")),
+    ("pedestrian", "ped_valid", ("ped_speed", "ped_start_time"), ("ped_size",)),
+)
+
+
+def _check_bodies(sc: Scenario) -> None:
+    """Finite positions and headings and positive finite sizes for every valid body: a zero
+    length gives the bicycle model a 0/0 (section 2.6), a NaN position would be clipped away
+    in the observation instead of raising. One pass over all values first (a reset should
+    stay cheap); the field-by-field search only runs to name a bad value."""
+    vals, sizes = [], []
+    for _, valid, fields, size_fields in _BODY_FIELDS:
+        v = np.asarray(getattr(sc, valid), dtype=bool)
+        vals += [np.asarray(getattr(sc, n), dtype=np.float64)[v].ravel() for n in fields]
+        sizes += [np.asarray(getattr(sc, n), dtype=np.float64)[v].ravel() for n in size_fields]
+    flat, size = np.concatenate(vals), np.concatenate(sizes)
+    if np.isfinite(flat).all() and ((size > 0) & (size < np.inf)).all():
+        return
+    for group, valid, fields, size_fields in _BODY_FIELDS:
+        v = np.asarray(getattr(sc, valid), dtype=bool)
+        for name in fields + size_fields:
+            x = np.asarray(getattr(sc, name), dtype=np.float64)[v]
+            bad = ~np.isfinite(x) if name in fields else ~(np.isfinite(x) & (x > 0))
+            if bad.any():
+                k = int(np.flatnonzero(bad.reshape(len(x), -1).any(axis=1))[0])
+                want = "finite values" if name in fields else "positive finite sizes [m]"
+                raise ValueError(
+                    f"scenario.{name}: expected {want} for valid {group} slots, got {x[k].tolist()} "
+                    f"in slot {int(np.flatnonzero(v)[k])}"
+                )
 
 
 def pack(b: dict[str, np.ndarray], d: Dims, w: int, sc: Scenario, dt: float, rng_key: int) -> None:

@@ -356,6 +356,10 @@ def test_custom_slots_and_eval_conditioning(grid_map):
         ({"episode_lengths": ()}, "episode_lengths"),
         ({"static_count": (5, 2)}, "static_count"),
         ({"region_size": 0.0}, "region_size must be positive"),
+        (
+            {"region_size": 30.0, "region_stride": 100.0},
+            r"region_stride must not exceed region_size, got region_stride=100.0 m and region_size=30.0 m",
+        ),
     ],
 )
 def test_bad_config_raises(kwargs, match):

@@ -197,10 +197,20 @@ def _bodies_in_range(env, i: int) -> int:
     p = slice(w * env.dims.P, (w + 1) * env.dims.P)
     keep = (st.active[a] | st.obstacle[a] | st.term[a] | st.trunc[a]).astype(bool)
     keep[i - w * A] = False
-    xs = np.concatenate([st.x[a][keep], st.st_x[s][st.st_valid[s] > 0],
-                         st.ped_x[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)]])
-    ys = np.concatenate([st.y[a][keep], st.st_y[s][st.st_valid[s] > 0],
-                         st.ped_y[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)]])
+    xs = np.concatenate(
+        [
+            st.x[a][keep],
+            st.st_x[s][st.st_valid[s] > 0],
+            st.ped_x[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)],
+        ]
+    )
+    ys = np.concatenate(
+        [
+            st.y[a][keep],
+            st.st_y[s][st.st_valid[s] > 0],
+            st.ped_y[p][(st.ped_valid[p] > 0) & (st.ped_here[p] > 0)],
+        ]
+    )
     d2 = (xs - st.x[i]) ** 2 + (ys - st.y[i]) ** 2
     return min(int(np.count_nonzero(d2 <= env.obs_config.radius**2)), env.layout.max_objects)
 
@@ -295,3 +305,75 @@ def test_smallest_candidate_capacity_gives_the_same_rollout():
     want = digest(SimParams().cand_cap, 1)
     assert digest(1, 1) == want
     assert digest(1, 2) == want
+
+
+def test_huge_lane_radius_gives_the_same_lanes(cmap):
+    """Lane association looks within min(lane_radius, obs radius); a radius of 1e12 m (accepted)
+    must give the same rollout as 1e3 m. (Regression: the grid bounds overflowed int, the
+    gather scanned nothing and no agent had a lane or road rows.)"""
+
+    def digest(lane_radius: float) -> tuple[str, bool]:
+        env = VecEnv(cmap, RandomSpawner(), 2, seed=4, params=SimParams(lane_radius=lane_radius))
+        env.reset(4)
+        rng = np.random.default_rng(3)
+        h, lanes = hashlib.sha256(), False
+        for _ in range(30):
+            env.step(rng.integers(0, [7, 13], size=(env.num_agents, 2)))
+            lanes |= bool(env.state.lane_valid[env.masks].any())
+            for arr in (env.observations, env.rewards, env.state.road_n, env.state.lane_s):
+                h.update(arr.tobytes())
+        return h.hexdigest(), lanes
+
+    want, lanes = digest(1e3)
+    assert lanes
+    assert digest(1e12) == (want, True)
+
+
+def _one_agent(**agent):
+    a = dict(xy=(1.75, -40.0), heading=np.pi / 2, speed=5.0, waypoints=[(1.75, 0), (1.75, 40)])
+    a.update(agent)
+    return make_scenario(
+        [a], A=2, K=3, S=1, P=1, statics=[dict(xy=(10.0, 10.0))], peds=[dict(path=[(-5.0, 0.0), (5.0, 0.0)])]
+    )
+
+
+def _edit(sc, name: str, index, value):
+    getattr(sc, name)[index] = value
+    return sc
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (
+            lambda sc: _edit(sc, "num_waypoints", 0, 4),
+            r"scenario.num_waypoints: expected counts in \[0, 3\].*got 4 in slot 0",
+        ),
+        (
+            lambda sc: _edit(sc, "ped_num_points", 0, 9),
+            r"scenario.ped_num_points: expected counts in \[0, 3\].*got 9",
+        ),
+        (
+            lambda sc: _edit(sc, "waypoints", (0, 1, 0), np.nan),
+            r"scenario.waypoints: expected finite points.*slot 0",
+        ),
+        (lambda sc: _edit(sc, "ped_path", (0, 0, 1), np.inf), r"scenario.ped_path: expected finite points"),
+        (
+            lambda sc: _edit(sc, "agent_length", 0, 0.0),
+            r"scenario.agent_length: expected positive finite sizes.*slot 0",
+        ),
+        (lambda sc: _edit(sc, "agent_xy", (0, 1), np.nan), r"scenario.agent_xy: expected finite values"),
+        (lambda sc: _edit(sc, "coeffs", (0, 2), np.inf), r"scenario.coeffs: expected finite values"),
+        (lambda sc: _edit(sc, "static_width", 0, -1.0), r"scenario.static_width: expected positive finite"),
+        (lambda sc: _edit(sc, "ped_size", (0, 1), np.nan), r"scenario.ped_size: expected positive finite"),
+    ],
+)
+def test_inconsistent_custom_scenario_is_refused(cmap, edit, match):
+    """A custom spawner's scenario whose counts exceed its arrays (the kernels would read past
+    the slot's row and, in the last world, past the buffer), or with non-finite positions or
+    non-positive sizes (a zero length is 0/0 in the bicycle model), raises a ValueError that
+    names the field, the value and the slot at reset."""
+    VecEnv(cmap, FixedSpawner(_one_agent()), 2).reset(0)  # the unedited scenario is fine
+    env = VecEnv(cmap, FixedSpawner(edit(_one_agent())), 2)
+    with pytest.raises(ValueError, match=match):
+        env.reset(0)
