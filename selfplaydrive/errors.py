@@ -26,3 +26,20 @@ class MapError(ValueError):
 
 class ConfigError(ValueError):
     """A configuration key or value is invalid; the message lists the valid choices."""
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is missing, unreadable, foreign or does not match the env.
+
+    Args:
+        message: What is wrong and what was expected.
+        path: The checkpoint file.
+    """
+
+    def __init__(self, message: str, path: object = None) -> None:
+        self.path = None if path is None else str(path)
+        super().__init__(f"[file {self.path}] {message}" if self.path is not None else message)
+
+
+class MissingExtraError(ImportError):
+    """An optional dependency is not installed; the message says what to install."""
