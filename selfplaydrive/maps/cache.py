@@ -19,8 +19,8 @@ import hashlib
 import json
 import os
 import tempfile
+import time
 import typing
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,11 +30,22 @@ import numpy as np
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps.roadmap import RoadMap
 
-__all__ = ["FORMAT_VERSION", "CacheMeta", "file_sha256", "load_roadmap", "read_meta", "save_roadmap"]
+__all__ = [
+    "FORMAT_VERSION",
+    "CacheMeta",
+    "file_sha256",
+    "load_roadmap",
+    "read_meta",
+    "remove_stale_temps",
+    "save_roadmap",
+]
 
 FORMAT_VERSION = 1
 _META_KEY = "__meta__"
 _FORMAT = "selfplaydrive.roadmap"
+# [s] a temporary file this old is a leftover of a killed writer: writing a cache takes well
+# under a second, so a live writer's file (another process filling the same cache) is younger
+STALE_TMP_AGE = 600.0
 
 
 @dataclass(frozen=True)
@@ -156,6 +167,7 @@ def save_roadmap(
     from selfplaydrive import __version__
 
     path = Path(path)
+    remove_stale_temps(path.parent, f".{path.name}.*.tmp")
     params = {"max_segment_length": road_map.max_segment_length, "cell_size": road_map.grid.cell_size}
     params.update(compile_params or {})
     meta = {
@@ -186,6 +198,31 @@ def save_roadmap(
             raise MapError(f"cannot write cache file: {exc.strerror or exc}", path) from exc
         raise
     return path
+
+
+def remove_stale_temps(
+    folder: str | os.PathLike[str], pattern: str, max_age: float = STALE_TMP_AGE
+) -> list[Path]:
+    """Delete the temporary files `save_roadmap` left behind when its process was killed.
+
+    Args:
+        folder: Folder to clean (a missing folder is fine).
+        pattern: Glob of the temporaries, e.g. ``".town.npz.*.tmp"`` (`save_roadmap` names them
+            ``.<target name>.<random>.tmp``).
+        max_age: Only files last modified at least this long ago [s] are deleted, so a
+            concurrent writer's file survives.
+
+    Returns:
+        The files deleted (errors such as a file removed meanwhile are ignored).
+    """
+    removed = []
+    cutoff = time.time() - max_age
+    for tmp in Path(folder).glob(pattern):
+        with contextlib.suppress(OSError):
+            if tmp.is_file() and tmp.stat().st_mtime <= cutoff:
+                tmp.unlink()
+                removed.append(tmp)
+    return removed
 
 
 # ---------------------------------------------------------------- load
@@ -225,8 +262,10 @@ def _read_arrays(path: Path, keys: list[str] | None) -> dict[str, np.ndarray]:
             return {k: npz[k] for k in names}
     except FileNotFoundError as exc:
         raise MapError("cache file not found", path) from exc
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        # bad zip, bad CRC, truncated member, object arrays (pickle refused) ...
+    except Exception as exc:
+        # bad zip, bad CRC, truncated member, object arrays (pickle refused), and whatever the
+        # npy header parser raises on a damaged header (tokenize.TokenError, SyntaxError ...):
+        # every way a file can be unreadable must come out as one MapError the loader handles
         raise MapError(
             f"cache file is corrupted or not a selfplaydrive map cache ({type(exc).__name__}: {exc}): "
             "delete it or pass rebuild=True",
@@ -295,6 +334,17 @@ def load_roadmap(
             message names the file and says to delete it or pass ``rebuild=True``.
     """
     path = Path(path)
+    try:
+        return _load_checked(path, expect_source_sha)
+    except MapError:
+        raise
+    except Exception as exc:  # a well-formed zip whose entries have the wrong dtype, shape ...
+        raise MapError(
+            f"cache file is corrupted ({type(exc).__name__}: {exc}): delete it or pass rebuild=True", path
+        ) from exc
+
+
+def _load_checked(path: Path, expect_source_sha: str | None) -> RoadMap:
     arrays = _read_arrays(path, None)
     meta = _parse_meta(arrays.pop(_META_KEY, None), path)
     if expect_source_sha is not None and meta.source_sha256 != expect_source_sha:

@@ -20,6 +20,10 @@ from selfplaydrive.maps.projection import LocalTransverseMercator, lest97
 # Tartu's local_x/local_y are L-EST97 minus this offset (measured, /work/shared/maps/README.md)
 TARTU_LEST97_OFFSET = (650000.0, 6465000.0)
 MAX_LOCAL_COORD = 1e8  # [m] larger local coordinates are corrupt (Earth's circumference is 4e7 m)
+# [m] Lanelet2 maps are local (Tartu's demo spans 3.2 km); a wider spread of the nodes that make
+# geometry means a mistyped coordinate, which would otherwise compile into a lane hundreds of
+# km long and a segment grid of gigabytes (same bound as OpenDRIVE's MAX_EXTENT)
+MAX_EXTENT = 1.0e5
 LEST97_MATCH_TOL = 1.0  # [m] local + offset must agree with the projected lat/lon this well
 
 
@@ -247,6 +251,35 @@ def _project(r: _Reader) -> tuple[np.ndarray, tuple[float, float], str]:
     return tm.forward(ll[:, 0], ll[:, 1]), (0.0, 0.0), tm.crs
 
 
+def _geometry_rows(r: _Reader) -> np.ndarray:
+    """Rows of `xy` of the nodes that can become geometry: way nodes and relation node members
+    (a node that nothing refers to never reaches the compiled map)."""
+    ids = {n for way in r.ways.values() for n in way.nodes}
+    ids.update(m.ref for rel in r.relations.values() for m in rel.members if m.type == "node")
+    return np.fromiter(sorted(r.node_row[n] for n in ids), dtype=np.int64, count=len(ids))
+
+
+def _check_extent(r: _Reader, xy: np.ndarray) -> None:
+    """Raise MapError naming the node farthest from the median node if the nodes used by ways
+    and relations spread wider than `MAX_EXTENT` in x or y."""
+    rows = _geometry_rows(r)
+    if len(rows) == 0:
+        return
+    pts = xy[rows]
+    span = np.ptp(pts, axis=0)
+    if np.all(span <= MAX_EXTENT):
+        return
+    # the median is robust to the few corrupt nodes, so the farthest node is the culprit
+    far = rows[int(np.argmax(np.abs(pts - np.median(pts, axis=0)).max(axis=1)))]
+    raise MapError(
+        f"the map's nodes span {span.max():.3g} m, more than {MAX_EXTENT:g} m; this node at "
+        f"({xy[far, 0]:.6g}, {xy[far, 1]:.6g}) [m] lies farthest from the rest (mistyped "
+        "coordinate?); expected a local map",
+        r.path,
+        f"node {r.ids[far]}",
+    )
+
+
 def read_osm(path: str | Path) -> OsmData:
     """Parse an OSM XML file, check its references and project its nodes to metres.
 
@@ -257,10 +290,12 @@ def read_osm(path: str | Path) -> OsmData:
         `OsmData` with planar node positions [m].
 
     Raises:
-        MapError: Malformed XML, bad numbers, duplicate ids, dangling references.
+        MapError: Malformed XML, bad numbers, duplicate ids, dangling references, or nodes
+            spread wider than `MAX_EXTENT` (the message names the farthest node).
     """
     spath = str(path)
     reader = _parse(spath)
     _check_refs(reader)
     xy, origin, crs = _project(reader)
+    _check_extent(reader, xy)
     return OsmData(spath, xy, reader.node_row, reader.ways, reader.relations, origin, crs)

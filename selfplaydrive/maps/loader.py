@@ -132,8 +132,10 @@ def _load_source_file(
             road_map = cache.load_roadmap(target, expect_source_sha=sha)
             log.debug("map cache hit: %s", target)
             return road_map
-        except MapError as exc:  # stale or damaged: rebuild below, say why
-            log.warning("rebuilding map cache: %s", exc)
+        except Exception as exc:  # stale, damaged, unreadable: the source is still good, rebuild
+            log.warning("rebuilding map cache %s from %s: %s", target, path, exc)
+    # leftovers of writers killed mid-write (any map's: the folder is ours)
+    cache.remove_stale_temps(target.parent, ".*.npz.*.tmp")
     road_map = factory(path, **kwargs).load()
     try:
         cache.save_roadmap(road_map, target, source_sha256=sha, compile_params=kwargs)

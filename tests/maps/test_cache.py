@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 import zipfile
 
@@ -140,6 +141,54 @@ def test_corrupted_file_raises_map_error(junction_map, tmp_path, damage):
     with pytest.raises(MapError, match="CRC" if damage == "flip" else "corrupted") as info:
         load_roadmap(path)
     assert info.value.path == str(path)
+
+
+def _flip_npy_header(path) -> None:
+    """Flip one bit of the closing brace of the largest member's npy header dict ('}' -> '|'):
+    numpy's header parser raises tokenize.TokenError before the zip CRC is checked (small
+    members are read whole, so there the CRC catches the flip first)."""
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as z:
+        info = max(z.infolist(), key=lambda i: i.file_size)
+    start = data.index(b"\x93NUMPY", info.header_offset)  # after the zip local header
+    data[data.index(b"}", start)] ^= 0x01
+    path.write_bytes(bytes(data))
+
+
+def test_damaged_npy_header_raises_map_error(tmp_path):
+    # a 20 km lane: 2,000 segments, so the largest member spans several zip read blocks
+    lane = LaneElement(np.array([[0.0, 0.0], [20000.0, 0.0]]), 3.5, 13.9, source_id="long")
+    path = save_roadmap(compile_map(MapElements(name="long", lanes=[lane])), tmp_path / "m.npz")
+    _flip_npy_header(path)
+    with pytest.raises(MapError, match="corrupted") as info:
+        load_roadmap(path)
+    assert info.value.path == str(path)
+    assert "TokenError" in str(info.value)  # the cause is named, not swallowed
+
+
+def test_wrong_entry_dtype_raises_map_error(junction_map, tmp_path):
+    # a well-formed zip whose scalar entry cannot be converted (a string where a float belongs)
+    path = save_roadmap(junction_map, tmp_path / "m.npz")
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["max_segment_length"] = np.asarray("ten metres")
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(MapError, match=r"max_segment_length|corrupted") as info:
+        load_roadmap(tmp_path / "bad.npz")
+    assert info.value.path == str(tmp_path / "bad.npz")
+
+
+def test_stale_temporary_is_removed_fresh_one_kept(junction_map, tmp_path):
+    stale = tmp_path / ".m.npz.abc123.tmp"  # what save_roadmap leaves when killed mid-write
+    fresh = tmp_path / ".m.npz.def456.tmp"  # a concurrent writer's file, still being written
+    other = tmp_path / "notes.tmp"  # not ours: never touched
+    for f in (stale, fresh, other):
+        f.write_bytes(b"PK\x03\x04 partial")
+    old = time.time() - cache.STALE_TMP_AGE - 60
+    os.utime(stale, (old, old))
+    os.utime(other, (old, old))
+    save_roadmap(junction_map, tmp_path / "m.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".m.npz.def456.tmp", "m.npz", "notes.tmp"]
 
 
 def test_missing_entry_and_inconsistent_offsets(junction_map, tmp_path):

@@ -299,6 +299,32 @@ def test_nan_coordinate(tmp_path):
     _expect_error(tmp_path, _osm(nodes, ways, rels), "node 111", "local_x")
 
 
+def test_mistyped_coordinate_names_the_node(tmp_path):
+    # one local_x typed as 10000000 instead of 60: before the extent check this compiled into
+    # a lane ~10,000 km long (an env on such a map took tens of seconds and gigabytes)
+    nodes, ways, rels = _toy()
+    nodes[121] = (10000000, 6)
+    _expect_error(tmp_path, _osm(nodes, ways, rels), "node 121", "1e+07", "more than 100000 m")
+
+
+def test_mistyped_latitude_names_the_node(tmp_path):
+    # lat/lon files: a latitude off by 2 degrees (~220 km once projected) is refused the same way
+    nodes, ways, rels = _toy()
+    scale = 1e-5  # ~1 m per 1e-5 degree
+    geo = {nid: (24.0 + x * scale, 58.0 + y * scale) for nid, (x, y) in nodes.items()}
+    geo[131] = (geo[131][0], 60.0)
+    _expect_error(tmp_path, _osm(geo, ways, rels, latlon=True), "node 131", "more than 100000 m")
+
+
+def test_far_node_outside_every_way_is_ignored(tmp_path):
+    # a stray node that no way or relation uses never becomes geometry: no reason to refuse
+    nodes, ways, rels = _toy()
+    nodes[999] = (5e6, 5e6)
+    elements = read_lanelet2(_write(tmp_path, _osm(nodes, ways, rels)))
+    pts = np.concatenate([lane.centerline for lane in elements.lanes])
+    assert np.ptp(pts, axis=0).max() < 300.0
+
+
 def test_map_without_lanelets(tmp_path):
     nodes, ways, _ = _toy()
     _expect_error(tmp_path, _osm(nodes, ways, {}), "no lanelet")

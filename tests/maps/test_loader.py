@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import logging
+import os
 import sys
+import time
 import types
+import zipfile
 
 import numpy as np
 import pytest
@@ -92,6 +95,52 @@ def test_damaged_cache_is_rebuilt(fake_osm, tmp_path, caplog):
     assert CountingLoader.calls == 2 and np.isclose(m.vehicle_lane_km(), 0.12)
     assert "rebuilding map cache" in caplog.text and str(cached) in caplog.text
     load_roadmap(cached)  # replaced by a valid file
+
+
+def test_cache_with_damaged_npy_header_is_rebuilt(fake_osm, tmp_path, caplog):
+    # one flipped bit in an npy header made numpy raise tokenize.TokenError, which escaped the
+    # loader and left the source map unloadable until the cache was deleted by hand
+    load_map(fake_osm, cache_dir=tmp_path, lane_length=20000.0)  # 2,000 segments: large members
+    cached = cache_path_for(fake_osm, tmp_path, lane_length=20000.0)
+    data = bytearray(cached.read_bytes())
+    with zipfile.ZipFile(cached) as z:
+        info = max(z.infolist(), key=lambda i: i.file_size)  # small members hit the CRC first
+    npy = data.index(b"\x93NUMPY", info.header_offset)  # after the zip local header
+    data[data.index(b"}", npy)] ^= 0x01  # the header dict's closing brace: '}' -> '|'
+    cached.write_bytes(bytes(data))
+    with caplog.at_level(logging.WARNING, logger="selfplaydrive.maps.loader"):
+        m = load_map(fake_osm, cache_dir=tmp_path, lane_length=20000.0)
+    assert CountingLoader.calls == 2 and np.isclose(m.vehicle_lane_km(), 20.0)
+    assert "rebuilding map cache" in caplog.text and str(fake_osm) in caplog.text
+    assert "TokenError" in caplog.text
+    load_roadmap(cached)  # replaced by a valid file
+
+
+def test_any_cache_read_error_rebuilds(fake_osm, tmp_path, monkeypatch, caplog):
+    load_map(fake_osm, cache_dir=tmp_path)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("unexpected failure inside the reader")
+
+    monkeypatch.setattr(loader.cache, "load_roadmap", broken)
+    with caplog.at_level(logging.WARNING, logger="selfplaydrive.maps.loader"):
+        m = load_map(fake_osm, cache_dir=tmp_path)
+    assert CountingLoader.calls == 2 and np.isclose(m.vehicle_lane_km(), 0.12)
+    assert "unexpected failure inside the reader" in caplog.text
+
+
+def test_killed_writer_temporary_is_cleaned(fake_osm, tmp_path):
+    cached = cache_path_for(fake_osm, tmp_path)
+    tmp_path.mkdir(exist_ok=True)
+    # a writer killed after mkstemp leaves its temporary and no cache; one of an older map too
+    own = tmp_path / f".{cached.name}.k1ll3d.tmp"
+    older = tmp_path / ".gone.0123456789abcdef0123.npz.x7.tmp"
+    for f in (own, older):
+        f.write_bytes(b"PK\x03\x04")
+        stamp = time.time() - 3600
+        os.utime(f, (stamp, stamp))
+    load_map(fake_osm, cache_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != "town.osm") == [cached.name]
 
 
 def test_env_var_sets_default_cache_dir(fake_osm, tmp_path, monkeypatch):
