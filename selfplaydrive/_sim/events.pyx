@@ -20,12 +20,23 @@ cdef void lights_peds_world(Sim* sim, const Params* prm, int w) noexcept nogil:
         for g in range(sim.G):
             i = w * sim.G + g
             sim.light_time[i] -= prm.dt
-            if sim.light_time[i] <= 0.0:
-                # a random state (off/red/yellow/green) for U(light_min, light_max) s (section 2.2)
-                sim.light_state[i] = <char>rng_int(sim.rng_key[w], &sim.rng_ctr[w], 4)
-                sim.light_time[i] = prm.light_min + (prm.light_max - prm.light_min) * rng_uniform(
-                    sim.rng_key[w], &sim.rng_ctr[w])
+            # the change falls on the step nearest its scheduled time (less than half a step
+            # left), not the first one past it: a drawn duration d in [light_min, light_max)
+            # then lasts round(d / dt) steps, which float32 rounding of the countdown cannot
+            # push outside [light_min, light_max] (section 2.2: 0.5-10 s)
+            if sim.light_time[i] <= 0.5 * prm.dt:
+                change_light(sim, prm, w, i)
     peds_world(sim, prm, w)
+
+
+cdef inline void change_light(Sim* sim, const Params* prm, int w, int i) noexcept nogil:
+    """Switch signal group i of world `w` to one of the 3 other states (off/red/yellow/green),
+    uniformly, for U(light_min, light_max) s. Never the same state again: a repeat would
+    extend the state past light_max (section 2.2: each state lasts 0.5-10 s)."""
+    cdef int step = 1 + rng_int(sim.rng_key[w], &sim.rng_ctr[w], 3)
+    sim.light_state[i] = <char>((sim.light_state[i] + step) % 4)
+    sim.light_time[i] = prm.light_min + (prm.light_max - prm.light_min) * rng_uniform(
+        sim.rng_key[w], &sim.rng_ctr[w])
 
 
 cdef void peds_world(Sim* sim, const Params* prm, int w) noexcept nogil:

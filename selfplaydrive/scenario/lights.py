@@ -2,7 +2,8 @@
 
 All lights are off in `all_off_prob` (50%) of episodes. Otherwise every signal group starts in
 a uniformly random state (off, red, yellow, green) with U(0.5, 10) s left until its next change;
-the simulator draws the later changes (each state lasting U(0.5, 10) s) during the episode.
+the simulator draws the later changes during the episode, each to one of the three other states
+for U(0.5, 10) s (`_sim/events.pyx`), so no state lasts longer than 10 s.
 """
 
 from __future__ import annotations

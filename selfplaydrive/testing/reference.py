@@ -144,6 +144,55 @@ def lane_association(road_map: RoadMap, x: float, y: float, heading: float, lane
     return True, s, alpha
 
 
+# ---------------------------------------------------------------------- traffic lights (2.2)
+
+_MASK64 = (1 << 64) - 1
+
+
+def stream_bits(key: int, counter: int, n: int) -> tuple[list[int], int]:
+    """The next `n` draws of a world's counter-based stream (rng.pxd) as 53-bit integers.
+
+    Draw number c + 1 (after counter c) is the SplitMix64 finaliser of key + (c + 1) times the
+    golden-ratio gamma; uniforms are bits / 2^53, integers in [0, m) are bits % m.
+
+    Returns:
+        The n integers in [0, 2^53) and the counter after them.
+    """
+    out = []
+    for j in range(1, n + 1):
+        z = (int(key) + (int(counter) + j) * 0x9E3779B97F4A7C15) & _MASK64
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+        out.append((z ^ (z >> 31)) >> 11)
+    return out, int(counter) + n
+
+
+def light_step(state, time_left, key: int, counter: int, dt=0.1, light_min=0.5, light_max=10.0):
+    """One step of the signal groups of one world whose lights are on (section 2.2).
+
+    Each group's countdown loses dt; a group with at most dt / 2 left (the step nearest its
+    scheduled change) moves to one of the 3 other states, uniformly, and draws a new duration
+    U(light_min, light_max). Groups change in index order, two draws each (state, duration),
+    from the world's stream. The countdown is float32 as in the simulator's buffers, so the
+    change decision is the same one the kernel makes.
+
+    Args:
+        state: (G,) light states 0-3 (off, red, yellow, green).
+        time_left: (G,) [s] until each group's next change.
+        key, counter: The world's random stream and how many numbers it has drawn.
+
+    Returns:
+        (G,) int8 states, (G,) float64 time left [s], the counter after the step.
+    """
+    state = np.asarray(state, np.int64).copy()
+    left = (np.asarray(time_left, np.float32) - np.float32(dt)).astype(np.float64)
+    for g in np.flatnonzero(left <= np.float32(0.5 * np.float32(dt))):
+        (bits_state, bits_time), counter = stream_bits(key, counter, 2)
+        state[g] = (state[g] + 1 + bits_state % 3) % 4
+        left[g] = light_min + (light_max - light_min) * bits_time / 2.0**53
+    return state.astype(np.int8), left, counter
+
+
 # --------------------------------------------------------------------------- rewards (2.3)
 
 

@@ -249,3 +249,32 @@ def test_road_selection_exact_after_teleport(cmap):
         np.testing.assert_allclose(_sorted_rows(gr[gr[:, 0] > 0]), _sorted_rows(road), atol=2e-5)
         checked += 1
     assert checked > 3
+
+
+def test_lights_match_reference(cmap):
+    """Random light states and countdowns (many near or past zero, so groups change often),
+    then one kernel step per round against `reference.light_step` on the same random stream."""
+    env = VecEnv(cmap, RandomSpawner(A=2, S=0, P=0), 64, physics=BicycleModel(), seed=9)
+    env.reset(9)
+    rng = np.random.default_rng(5)
+    b, G = env.buffers, env.dims.G
+    zero = np.tile(np.array([3, 6]), (env.num_agents, 1))
+    changed = checked = 0
+    for _ in range(10):
+        b["lights_on"][:] = 1  # every world steps its lights, whatever the spawner drew
+        b["light_state"][:] = rng.integers(0, 4, size=b["light_state"].shape)
+        b["light_time"][:] = rng.uniform(-0.2, 0.4, size=b["light_time"].shape)
+        pre = {k: b[k].copy() for k in ("light_state", "light_time", "rng_key", "rng_ctr")}
+        env.step(zero)
+        for w in np.flatnonzero(b["step"] > 0):  # worlds reset by this step were repacked
+            g = slice(w * G, (w + 1) * G)
+            state, left, ctr = ref.light_step(
+                pre["light_state"][g], pre["light_time"][g], int(pre["rng_key"][w]), int(pre["rng_ctr"][w])
+            )
+            np.testing.assert_array_equal(b["light_state"][g], state)
+            np.testing.assert_allclose(b["light_time"][g], left, rtol=1e-6, atol=1e-6)
+            assert int(b["rng_ctr"][w]) == ctr
+            changed += int(np.sum(state != pre["light_state"][g]))
+            checked += G
+    assert G >= 2 and checked > 500
+    assert changed > checked // 4  # the changes were exercised, and a change never repeats a state
