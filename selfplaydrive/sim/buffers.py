@@ -63,6 +63,21 @@ def _kernel_scratch(A: int, S: int, P: int) -> int:
 
 def allocate(d: Dims) -> dict[str, np.ndarray]:
     """Zeroed buffers for all worlds (the kernels never clear them wholesale)."""
+    b = {name: np.zeros(shape, dtype=dtype) for name, (shape, dtype) in _shapes(d).items()}
+    b["road_r"][:] = -1.0  # no road gather yet: the first one searches without a hint
+    return b
+
+
+def buffer_bytes(d: Dims) -> int:
+    """Bytes `allocate(d)` would take, computed without allocating (to refuse a num_worlds
+    that cannot fit before the allocation succeeds lazily and the first touch runs out)."""
+    return sum(
+        int(np.prod(shape, dtype=np.int64)) * np.dtype(dt).itemsize for shape, dt in _shapes(d).values()
+    )
+
+
+def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
+    """Shape and dtype of every buffer."""
     N, f4, u1, i4 = d.W * d.A, np.float32, np.uint8, np.int32
     shapes: dict[str, tuple[tuple[int, ...], type]] = {}
     for name in (
@@ -110,9 +125,7 @@ def allocate(d: Dims) -> dict[str, np.ndarray]:
         "ped_speed ped_start ped_len ped_wid ped_x ped_y ped_px ped_py ped_cos ped_sin ped_vx ped_vy".split()
     ):
         shapes[name] = ((d.W * d.P,), f4)
-    b = {name: np.zeros(shape, dtype=dtype) for name, (shape, dtype) in shapes.items()}
-    b["road_r"][:] = -1.0  # no road gather yet: the first one searches without a hint
-    return b
+    return shapes
 
 
 def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:

@@ -19,24 +19,33 @@ observations and `final_observations` keep the last ones of the agents that ende
 
 from __future__ import annotations
 
+import os
+import warnings
 from collections.abc import Sequence
 from types import SimpleNamespace
 
 import numpy as np
 
 from selfplaydrive._sim.world import STAGES, World, copy_discrete
+from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
 from selfplaydrive.rewards.registry import EVENT_NAMES, TERM_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
-from selfplaydrive.sim.buffers import Dims, allocate, check_scenario, pack
+from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
 from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.params import SimParams
 
 _FAST_ACTION_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
 EVER_BITS = {"collision": 1, "pedestrian_collision": 2, "offroad": 4, "red_light": 8}
+# OpenMP threads at most: far more than any useful count (the worlds are split among threads),
+# far fewer than the tens of thousands with which libgomp kills the process
+MAX_THREADS = max(64, 4 * (os.cpu_count() or 1))
+# finished-episode records kept until `pop_episode_stats` (a few kB each): an env stepped
+# without popping them keeps the newest ones instead of growing without bound
+MAX_EPISODE_STATS = 10_000
 
 
 class VecEnv:
@@ -52,11 +61,18 @@ class VecEnv:
         params: `SimParams` (default: the paper's constants).
         obs: `ObsConfig` (63 objects, 200 road segments within 100 m).
         seed: Seed of the first `reset`.
-        num_threads: OpenMP threads stepping the worlds (results do not depend on it).
+        num_threads: OpenMP threads stepping the worlds (results do not depend on it), at
+            most `MAX_THREADS`.
         terminated_vehicle: "remove" or "obstacle" (stays as a static obstacle).
         reward_hooks: Python reward terms run after the kernels.
         obs_hooks: Python observation features appended after the kernel columns.
         profile: Time each stage (slower: one parallel loop per stage).
+
+    Raises:
+        ConfigError: `num_worlds`, `num_threads` or `seed` not an integer in range (2.5 is
+            refused, not truncated), or buffers for `num_worlds` worlds larger than the
+            memory available (the message gives the bytes per world).
+        ValueError: Other bad arguments, each naming the argument.
     """
 
     def __init__(
@@ -82,8 +98,9 @@ class VecEnv:
             raise ValueError(
                 f"spawner: expected an object with a sample(road_map, rng, map_index) method, got {spawner!r}"
             )
-        if int(num_worlds) < 1:
-            raise ValueError(f"num_worlds: expected an integer >= 1, got {num_worlds!r}")
+        num_worlds = _integer("num_worlds", num_worlds, 1)
+        num_threads = _integer("num_threads", num_threads, 1, MAX_THREADS)
+        seed = _seed(seed)
         if terminated_vehicle not in ("remove", "obstacle"):
             raise ValueError(
                 f"terminated_vehicle: expected 'remove' or 'obstacle', got {terminated_vehicle!r}"
@@ -95,7 +112,7 @@ class VecEnv:
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
         self.obs_config = obs if obs is not None else ObsConfig()
-        self.num_threads = _threads(num_threads)
+        self.num_threads = num_threads
         self.terminated_vehicle = terminated_vehicle
         self.reward_hooks = list(reward_hooks)
         self.obs_hooks = list(obs_hooks)
@@ -104,7 +121,10 @@ class VecEnv:
             self.obs_config.max_objects, self.obs_config.max_road, sum(int(h.dim) for h in self.obs_hooks)
         )
         self._seed = seed
-        self._setup_rngs(seed)
+        # world 0's generator alone first: the first scenario gives the buffer sizes, which
+        # are checked against the memory before num_worlds generators are made
+        seeds = _world_seeds(seed, self.num_worlds)
+        self._world_rngs = [np.random.default_rng(int(seeds[0]))]
         first = self._sample(0)
         G = max([1] + [m.num_signal_groups for m in self.maps])
         p = self.params
@@ -117,11 +137,14 @@ class VecEnv:
             p.cand_cap,
             self.layout.obs_dim,
         )
+        _check_memory(self.dims)
+        self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]
         self.buffers = allocate(self.dims)
         self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
         self._world = World(self.dims.__dict__, self.buffers, self.atlas, self._kernel_params())
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
+        self.dropped_episode_stats = 0  # records discarded past MAX_EPISODE_STATS
         self._pending_first = first
 
     # construction helpers -------------------------------------------------------------------
@@ -162,10 +185,7 @@ class VecEnv:
         self.action_space = self.action_table.space
 
     def _setup_rngs(self, seed: int | None) -> None:
-        root = np.random.default_rng(seed)
-        self._world_rngs = [
-            np.random.default_rng(int(s)) for s in root.integers(0, 2**63 - 1, size=self.num_worlds)
-        ]
+        self._world_rngs = [np.random.default_rng(int(s)) for s in _world_seeds(seed, self.num_worlds)]
 
     def _sample(self, w: int):
         rng = self._world_rngs[w]
@@ -176,9 +196,18 @@ class VecEnv:
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Start a new episode in every world; same seed, same rollout (any thread count).
 
+        Args:
+            seed: Seed of the world generators (a non-negative integer); None continues from
+                the last seed.
+
         Returns:
             The (N, obs_dim) observations buffer.
+
+        Raises:
+            ConfigError: `seed` is not a non-negative integer.
         """
+        if seed is not None:
+            seed = _seed(seed)
         if seed is not None or self._pending_first is None:
             self._setup_rngs(self._seed if seed is None else seed)
             if seed is not None:
@@ -311,6 +340,23 @@ class VecEnv:
                 rec["terms"].update({h.name: float(extra[w, k]) for k, h in enumerate(self.reward_hooks)})
                 extra[w] = 0.0
             self.episode_stats.append(rec)
+        self._cap_episode_stats()
+
+    def _cap_episode_stats(self) -> None:
+        """Keep the newest `MAX_EPISODE_STATS` records; warn the first time some are dropped
+        (an env stepped for days without `pop_episode_stats` would otherwise fill the memory)."""
+        extra = len(self.episode_stats) - MAX_EPISODE_STATS
+        if extra <= 0:
+            return
+        if self.dropped_episode_stats == 0:
+            warnings.warn(
+                f"VecEnv keeps at most {MAX_EPISODE_STATS} finished-episode records; older ones are "
+                "dropped (counted in dropped_episode_stats): call pop_episode_stats() to collect them",
+                UserWarning,
+                stacklevel=4,
+            )
+        del self.episode_stats[:extra]
+        self.dropped_episode_stats += extra
 
     def pop_episode_stats(self) -> list[dict[str, object]]:
         """Statistics of the episodes finished since the last call (per-term sums, event
@@ -347,10 +393,62 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     return v
 
 
-def _threads(n: int) -> int:
-    if int(n) < 1:
-        raise ValueError(f"num_threads: expected an integer >= 1, got {n!r}")
-    return int(n)
+def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
+    """`value` as an int in [low, high]; a fractional or non-numeric value is refused (int()
+    would truncate 2.5 to 2 and turn "abc" into a bare ValueError)."""
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        value = int(value)  # 4.0 from a YAML file is 4
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if ok and low <= int(value) and (high is None or int(value) <= high):
+        return int(value)
+    bound = f"in [{low}, {high}]" if high is not None else f">= {low}"
+    raise ConfigError(f"{name}: expected an integer {bound}, got {value!r}")
+
+
+def _seed(seed: object) -> int | None:
+    """A seed for numpy's generators: a non-negative integer, or None (fresh entropy)."""
+    if seed is None:
+        return None
+    ok = isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0
+    if not ok:
+        raise ConfigError(f"seed: expected a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _world_seeds(seed: int | None, num_worlds: int) -> np.ndarray:
+    """One seed per world, drawn from the env seed."""
+    return np.random.default_rng(seed).integers(0, 2**63 - 1, size=num_worlds)
+
+
+def _available_memory() -> int | None:
+    """Bytes of memory the process may still use: MemAvailable of /proc/meminfo, else the free
+    physical pages; None where neither is known."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _check_memory(dims: Dims) -> None:
+    """Refuse buffers larger than the available memory, before allocating them (NumPy's zeroed
+    arrays are allocated lazily, so the process would die at the first touch instead)."""
+    need = buffer_bytes(dims)
+    available = _available_memory()
+    if available is None or need <= available:
+        return
+    per_world = need / dims.W
+    raise ConfigError(
+        f"num_worlds={dims.W}: the simulator buffers need {need / 1e9:,.1f} GB ({per_world / 1e6:.2f} MB "
+        f"per world of {dims.A} agent slots), more than the {available / 1e9:,.1f} GB of memory "
+        f"available; expected num_worlds <= {int(available // per_world)}"
+    )
 
 
 def _box(layout: ObsLayout):
