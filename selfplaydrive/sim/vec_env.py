@@ -98,9 +98,9 @@ class VecEnv:
             raise ValueError(
                 f"spawner: expected an object with a sample(road_map, rng, map_index) method, got {spawner!r}"
             )
-        num_worlds = _integer("num_worlds", num_worlds, 1)
-        num_threads = _integer("num_threads", num_threads, 1, MAX_THREADS)
-        seed = _seed(seed)
+        num_worlds = check_integer("num_worlds", num_worlds, 1)
+        num_threads = check_integer("num_threads", num_threads, 1, MAX_THREADS)
+        seed = check_seed(seed)
         if terminated_vehicle not in ("remove", "obstacle"):
             raise ValueError(
                 f"terminated_vehicle: expected 'remove' or 'obstacle', got {terminated_vehicle!r}"
@@ -207,7 +207,7 @@ class VecEnv:
             ConfigError: `seed` is not a non-negative integer.
         """
         if seed is not None:
-            seed = _seed(seed)
+            seed = check_seed(seed)
         if seed is not None or self._pending_first is None:
             self._setup_rngs(self._seed if seed is None else seed)
             if seed is not None:
@@ -393,9 +393,13 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     return v
 
 
-def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
+def check_integer(name: str, value: object, low: int, high: int | None = None) -> int:
     """`value` as an int in [low, high]; a fractional or non-numeric value is refused (int()
-    would truncate 2.5 to 2 and turn "abc" into a bare ValueError)."""
+    would truncate 2.5 to 2 and turn "abc" into a bare ValueError).
+
+    Raises:
+        ConfigError: Naming `name` (the argument or config key), the value and the range.
+    """
     if isinstance(value, (float, np.floating)) and float(value).is_integer():
         value = int(value)  # 4.0 from a YAML file is 4
     ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
@@ -405,13 +409,17 @@ def _integer(name: str, value: object, low: int, high: int | None = None) -> int
     raise ConfigError(f"{name}: expected an integer {bound}, got {value!r}")
 
 
-def _seed(seed: object) -> int | None:
-    """A seed for numpy's generators: a non-negative integer, or None (fresh entropy)."""
+def check_seed(seed: object, name: str = "seed") -> int | None:
+    """A seed for numpy's generators: a non-negative integer, or None (fresh entropy).
+
+    Raises:
+        ConfigError: Naming `name` and the value.
+    """
     if seed is None:
         return None
     ok = isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0
     if not ok:
-        raise ConfigError(f"seed: expected a non-negative integer, got {seed!r}")
+        raise ConfigError(f"{name}: expected a non-negative integer, got {seed!r}")
     return int(seed)
 
 
