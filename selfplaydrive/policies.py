@@ -147,7 +147,7 @@ def load_checkpoint(path: str | os.PathLike[str], map_location: str = "cpu") -> 
     with requires_extra("torch"):
         from selfplaydrive.trainers.ppo import checkpoint as ckpt
     try:
-        payload = ckpt.load(path, map_location=map_location)
+        payload = ckpt.load(path, map_location=map_location, required=ckpt.POLICY_KEYS)
     except CheckpointError:
         raise
     except Exception as exc:  # torch.load fails on foreign files with many types (pickle, zip, EOF ...)

@@ -27,6 +27,8 @@ with requires_extra("torch"):
 FORMAT_VERSION = 1
 # what every checkpoint of `PPOTrainer.state_dict` holds; a .pt without them is foreign
 REQUIRED_KEYS = frozenset({"format_version", "model", "optimizer", "counters", "env"})
+# what acting needs (eval, render, a shipped policy): the weights; a training checkpoint has more
+POLICY_KEYS = frozenset({"format_version", "model"})
 _ENV_PY_ATTRS = ("_seed", "_pending_first", "episode_stats", "_extra_sums")
 
 
@@ -165,9 +167,17 @@ def safe_globals() -> list[object]:
     ]
 
 
-def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, object]:
+def load(
+    path: str | Path, map_location: str | torch.device = "cpu", required: frozenset[str] = REQUIRED_KEYS
+) -> dict[str, object]:
     """Read a checkpoint written by `save`, unpickling only the types of `safe_globals()`
     (`torch.load(weights_only=True)`): a foreign `.pt` cannot run code.
+
+    Args:
+        path: The `.pt` file.
+        map_location: Torch device of the loaded tensors.
+        required: Keys the payload must hold: `REQUIRED_KEYS` to resume training,
+            `POLICY_KEYS` to act (a policy-only file holds the weights and its config).
 
     Raises:
         CheckpointError: No such file, not a torch file, a pickle with other types, a file
@@ -181,7 +191,7 @@ def load(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str
             payload = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # torch raises UnpicklingError, RuntimeError, EOFError ... on bad files
         raise CheckpointError(f"cannot read the checkpoint: {_describe_load_error(exc)}", path) from exc
-    missing = sorted(REQUIRED_KEYS - set(payload)) if isinstance(payload, dict) else sorted(REQUIRED_KEYS)
+    missing = sorted(required - set(payload)) if isinstance(payload, dict) else sorted(required)
     if missing:
         raise CheckpointError(
             f"not a selfplaydrive checkpoint: a {type(payload).__name__} without the key(s) {missing}", path
