@@ -190,7 +190,16 @@ def bimodal_uniform(
     p_a: float,
 ) -> _F32: ...
 def boxes_meet(
-    ax: float, ay: float, ah: float, al: float, aw: float, bx: float, by: float, bh: float, bl: float, bw: float
+    ax: float,
+    ay: float,
+    ah: float,
+    al: float,
+    aw: float,
+    bx: float,
+    by: float,
+    bh: float,
+    bl: float,
+    bw: float,
 ) -> bool: ...
 
 class SizeTable:
