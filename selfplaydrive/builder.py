@@ -184,7 +184,7 @@ def make_env(
     from selfplaydrive.scenario.spawner import PaperSpawner
     from selfplaydrive.sim.vec_env import VecEnv
 
-    items = map if isinstance(map, (list, tuple)) else [map]
+    items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
     if spawner is None:
         spawner = PaperSpawner(conditioning=reward) if reward is not None else PaperSpawner()

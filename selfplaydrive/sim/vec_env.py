@@ -23,6 +23,7 @@ import os
 import warnings
 from collections.abc import Sequence
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,7 @@ class VecEnv:
         actions: DiscreteActions | ContinuousActions | None = None,
         params: SimParams | None = None,
         obs: ObsConfig | None = None,
-        seed: int = 0,
+        seed: int | None = 0,
         num_threads: int = 1,
         terminated_vehicle: str = "remove",
         reward_hooks: Sequence[RewardHook] = (),
@@ -107,7 +108,8 @@ class VecEnv:
             )
         self.spawner = spawner
         self.num_worlds = int(num_worlds)
-        self.physics = physics if physics is not None else FrictionBicycleModel()
+        # a kernel model or one stepped in Python (`external`, physics/pymunk_model.py)
+        self.physics: Any = physics if physics is not None else FrictionBicycleModel()
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
@@ -325,6 +327,10 @@ class VecEnv:
             a = slice(w * A, (w + 1) * A)
             ever = b["ever"][a]
             spawned = int(np.count_nonzero(b["agent_valid"][a]))
+            terms = {n: float(v) for n, v in zip(TERM_NAMES, b["term_sum"][w], strict=True)}
+            if extra is not None:
+                terms.update({h.name: float(extra[w, k]) for k, h in enumerate(self.reward_hooks)})
+                extra[w] = 0.0
             rec: dict[str, object] = {
                 "world": int(w),
                 "map": int(b["map_id"][w]),
@@ -332,13 +338,10 @@ class VecEnv:
                 "num_agents": spawned,
                 "spawn_shortfall": A - spawned,
                 "km": float(b["dist"][w] / 1000.0),
-                "terms": {n: float(v) for n, v in zip(TERM_NAMES, b["term_sum"][w], strict=True)},
+                "terms": terms,
                 "events": {n: int(v) for n, v in zip(EVENT_NAMES, b["ev_count"][w], strict=True)},
                 "agents_with": {n: int(np.count_nonzero(ever & bit)) for n, bit in EVER_BITS.items()},
             }
-            if extra is not None:
-                rec["terms"].update({h.name: float(extra[w, k]) for k, h in enumerate(self.reward_hooks)})
-                extra[w] = 0.0
             self.episode_stats.append(rec)
         self._cap_episode_stats()
 
@@ -402,9 +405,9 @@ def check_integer(name: str, value: object, low: int, high: int | None = None) -
     """
     if isinstance(value, (float, np.floating)) and float(value).is_integer():
         value = int(value)  # 4.0 from a YAML file is 4
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-    if ok and low <= int(value) and (high is None or int(value) <= high):
-        return int(value)
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        if low <= int(value) and (high is None or int(value) <= high):
+            return int(value)
     bound = f"in [{low}, {high}]" if high is not None else f">= {low}"
     raise ConfigError(f"{name}: expected an integer {bound}, got {value!r}")
 
@@ -417,10 +420,9 @@ def check_seed(seed: object, name: str = "seed") -> int | None:
     """
     if seed is None:
         return None
-    ok = isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0
-    if not ok:
-        raise ConfigError(f"{name}: expected a non-negative integer, got {seed!r}")
-    return int(seed)
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0:
+        return int(seed)
+    raise ConfigError(f"{name}: expected a non-negative integer, got {seed!r}")
 
 
 def _world_seeds(seed: int | None, num_worlds: int) -> np.ndarray:
