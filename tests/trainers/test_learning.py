@@ -52,12 +52,15 @@ def evaluate(trainer: PPOTrainer, episodes: int) -> dict[str, float]:
     return trainer.evaluate(episodes, 3000, deterministic=False, seed=EVAL_SEED)
 
 
-# About 65 s on the development machine: in the default suite, since it is issue #5's
-# acceptance test for learning.
+# About 30 s on the development machine (65 s before issue #16): in the default suite, since
+# it is issue #5's acceptance test for learning.
 def test_waypoint_completion_rises_from_under_10_to_over_60_percent():
     t0 = time.perf_counter()
     trainer = make_trainer(num_worlds=32, updates=100, task=TASK, coeffs=TASK_COEFFS)
-    before = evaluate(trainer, 64)
+    # The random policy completes 7-11 % of its waypoints over 64 world-episodes, depending on
+    # the sampling seed (0.070-0.109 for seeds 0 and 6-8, before and after issue #16's trainer
+    # changed which random numbers acting draws); 256 episodes measure its mean, about 9 %.
+    before = evaluate(trainer, 256)
     trainer.train()
     after = evaluate(trainer, 64)
     print(
@@ -65,7 +68,7 @@ def test_waypoint_completion_rises_from_under_10_to_over_60_percent():
         f"return {before['return_mean']:.3f} -> {after['return_mean']:.3f}, "
         f"{trainer.agent_steps} agent-steps, {time.perf_counter() - t0:.0f} s"
     )
-    assert before["episodes"] >= 64 and after["episodes"] >= 64
+    assert before["episodes"] >= 256 and after["episodes"] >= 64
     assert before["waypoint_completion"] < 0.10
     assert after["waypoint_completion"] > 0.60
     assert after["offroad_rate"] < before["offroad_rate"]

@@ -114,3 +114,13 @@ def test_spinning_torch_threads_are_warned_about(monkeypatch, recwarn, env, thre
     assert bool(messages) == warns
     if warns:
         assert "OMP_WAIT_POLICY=passive" in messages[0]
+
+
+def test_every_slot_is_kept_when_too_few_acted():
+    trainer = make_trainer()
+    trainer.collect()
+    trainer.storage.active.zero_()
+    trainer.storage.active[:, 5] = True  # one live slot, two minibatches
+    assert trainer._live_slots().tolist() == list(range(trainer.num_slots))
+    trainer.storage.active[:, 9] = True
+    assert trainer._live_slots().tolist() == [5, 9]

@@ -114,8 +114,11 @@ class PPOTrainer:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
         self.evaluator = wrap(self.model, self.dist, self.device)
-        # models whose forward_sequence takes `active` skip the entries that carry no loss
-        self.skip_inactive = "active" in inspect.signature(model.forward_sequence).parameters
+        # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
+        # under DDP: a rank whose minibatch has no active entry would leave the encoders without
+        # gradients, and DDP expects every parameter's gradient on every rank.
+        accepts = "active" in inspect.signature(model.forward_sequence).parameters
+        self.skip_inactive = accepts and not self.dist.enabled
         # the fused kernel: one op per step instead of a dozen per parameter (0.5 -> 0.14 ms a
         # step for the laptop model on the CPU, the same update up to float rounding)
         fused = self.device.type in ("cpu", "cuda")
@@ -301,13 +304,14 @@ class PPOTrainer:
             frac = 1.0 - self.update_idx / self.total_updates
             self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
         live = self._live_slots()
-        size = -(-len(live) // cfg.num_minibatches)
         sums: dict[str, float] = {}
         count = 0
         for _epoch in range(cfg.num_epochs):
             order = live[torch.randperm(len(live), generator=self.shuffle_gen).to(self.device)]
-            for start in range(0, len(live), size):
-                loss, info = self.minibatch_loss(order[start : start + size])
+            for slots in torch.tensor_split(order, cfg.num_minibatches):
+                if not len(slots):  # more minibatches than agent slots
+                    continue
+                loss, info = self.minibatch_loss(slots)
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 if cfg.max_grad_norm > 0:
@@ -325,14 +329,18 @@ class PPOTrainer:
         return out
 
     def _live_slots(self) -> Tensor:
-        """The agent slots that acted at some step of the rollout, (K,) int64 on the device.
+        """The agent slots the minibatches are cut from, (K,) int64 on the device: those that
+        acted at some step of the rollout.
 
-        The others carry no loss, so the minibatches are cut from these alone: with
-        experiment=laptop, where every contact ends an agent until its world resets, about half
-        the slots stay empty for a whole rollout, and their BPTT would be half an update's work.
-        (Every slot is kept when none acted, so that an update still takes its optimizer steps.)"""
+        The others carry no loss: with experiment=laptop, where every contact ends an agent
+        until its world resets, about half the slots stay empty for a whole rollout, and their
+        BPTT would be half an update's work. Every slot is kept when fewer than
+        `num_minibatches` acted (each minibatch needs one), and under DDP, whose ranks must
+        take the same steps with gradients for every parameter."""
         live = torch.nonzero(self.storage.active.any(dim=0)).flatten()
-        return live if len(live) else torch.arange(self.num_slots, device=self.device)
+        if self.dist.enabled or len(live) < self.config.num_minibatches:
+            return torch.arange(self.num_slots, device=self.device)
+        return live
 
     def _explained_variance(self) -> float:
         s = self.storage
