@@ -219,12 +219,13 @@ def test_every_eval_option_is_valid(option):
     from selfplaydrive.eval.app import ANALYSES
     from selfplaydrive.eval.diversity import run_diversity
     from selfplaydrive.eval.longform import run_longform
-    from selfplaydrive.eval.suites.report import PAPER_COUNTS
+    from selfplaydrive.eval.suites.report import PAPER_COUNTS, default_suites
 
     cfg = compose("eval", [f"eval={option}"])
     assert set(cfg.eval) == {"analyses", "batch_size", "suites", "longform", "diversity"}
     assert set(cfg.eval.analyses) <= set(ANALYSES)
-    assert set(cfg.eval.suites) == set(PAPER_COUNTS) and all(v >= 1 for v in cfg.eval.suites.values())
+    assert set(PAPER_COUNTS) <= set(cfg.eval.suites) <= set(default_suites())
+    assert all(v >= 1 for v in cfg.eval.suites.values())
     assert set(cfg.eval.longform) <= set(inspect.signature(run_longform).parameters)
     assert set(cfg.eval.diversity) <= set(inspect.signature(run_diversity).parameters)
     assert cfg.eval.batch_size >= 1

@@ -67,6 +67,9 @@ class Trajectory:
         collided: (A,) bool, the agent collided with a vehicle or pedestrian (collision term).
         collision_frame: (A,) int32 first frame after the collision, -1 without one.
         offroad: (A,) bool, the agent touched a road edge.
+        red_light: (A,) bool, the simulator's red-light term fired for the agent (the reward's
+            view; the red-light suite classifies geometrically instead, section 5.1), or None
+            for a trajectory made by hand.
     """
 
     dt: float
@@ -78,6 +81,7 @@ class Trajectory:
     collided: np.ndarray
     collision_frame: np.ndarray
     offroad: np.ndarray
+    red_light: np.ndarray | None = None
 
     @property
     def time(self) -> np.ndarray:
@@ -280,6 +284,7 @@ def _run_batch(env, act, batch: list[SuiteScenario], seed: int, hide: bool) -> l
     running = np.ones(n, bool)
     col = list(env.term_names).index("collision")
     off = list(env.term_names).index("offroad")
+    red = list(env.term_names).index("red_light")
     for f in range(1, steps + 1):
         o = hide_stop_lines(obs, env.layout) if hide else obs
         env.step(act(o))
@@ -289,6 +294,7 @@ def _run_batch(env, act, batch: list[SuiteScenario], seed: int, hide: bool) -> l
         hit = running[:, None] & acted & (terms[..., col] != 0)
         rec.collision_frame[hit & (rec.collision_frame < 0)] = f
         rec.offroad |= running[:, None] & acted & (terms[..., off] != 0)
+        rec.red_light |= running[:, None] & acted & (terms[..., red] != 0)
         running &= env.state.step[:n] != 0  # an autoreset world starts again at step 0
         rec.frame(env.state, f, running)
         if not running.any():
@@ -309,6 +315,7 @@ class _Recorder:
         self.frames = np.zeros(n, np.int64)
         self.collision_frame = np.full((n, A), -1, np.int32)
         self.offroad = np.zeros((n, A), bool)
+        self.red_light = np.zeros((n, A), bool)
 
     def frame(self, st, f: int, which: np.ndarray) -> None:
         n, A, P = self.n, self.A, self.P
@@ -336,4 +343,5 @@ class _Recorder:
             collided=self.collision_frame[w] >= 0,
             collision_frame=self.collision_frame[w].copy(),
             offroad=self.offroad[w].copy(),
+            red_light=self.red_light[w].copy(),
         )

@@ -22,8 +22,9 @@ passes when it reaches X. It *stopped* when its speed fell below `STOP_SPEED` wh
 was within `STOP_ZONE` m before the crosswalk (or at most 1 m onto it) and before passing.
 Outcomes: "collision" (the ego's collision term fired), "stopped", then for a pass: waiting
 variant "passed"; crossing variant "passed_in_front" (the pedestrian had not yet reached the
-ego's line when the ego passed) or "passed_behind"; "other" when the ego neither stopped
-there nor passed.
+ego's line when the ego passed) or "passed_behind"; "road_edge" when it neither stopped there
+nor passed and its road-edge term fired (it left the road: terminated, or scraping a kerb);
+"other" when it neither stopped there nor passed otherwise (too slow, another route).
 """
 
 from __future__ import annotations
@@ -60,8 +61,8 @@ from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
 VARIANTS = ("waiting", "crossing")
 OUTCOMES = {
-    "waiting": ("collision", "stopped", "passed", "other"),
-    "crossing": ("collision", "stopped", "passed_in_front", "passed_behind", "other"),
+    "waiting": ("collision", "stopped", "passed", "road_edge", "other"),
+    "crossing": ("collision", "stopped", "passed_in_front", "passed_behind", "road_edge", "other"),
 }
 STOP_SPEED = 0.5  # [m/s] below this the ego counts as stopped
 STOP_ZONE = 20.0  # [m] before the crosswalk where a stop counts as yielding
@@ -318,7 +319,7 @@ def classify_crosswalk(item: SuiteScenario, traj: Trajectory, slot: int = 0) -> 
     elif len(stops):
         res["outcome"] = "stopped"
     elif k < 0:
-        res["outcome"] = "other"
+        res["outcome"] = "road_edge" if bool(traj.offroad[slot]) else "other"
     elif info["variant"] == "waiting":
         res["outcome"] = "passed"
     else:

@@ -1,5 +1,6 @@
 """`run_all_suites`: generate, drive, classify and aggregate every rule-adherence suite of paper
-section 5.3 in one call, with JSON-ready results (for `selfplaydrive eval`)."""
+section 5.3 and the failure-mode suites of sections 5.1-5.2 (red lights, stop signs, spawn
+sanity) in one call, with JSON-ready results (for `selfplaydrive eval`)."""
 
 from __future__ import annotations
 
@@ -11,16 +12,28 @@ import numpy as np
 
 from selfplaydrive.eval.suites.base import PolicyFactory, SuiteScenario, run_suite
 from selfplaydrive.eval.suites.crosswalks import CrosswalkSuite
+from selfplaydrive.eval.suites.red_lights import RedLightSuite
+from selfplaydrive.eval.suites.spawn_sanity import SpawnSanitySuite
 from selfplaydrive.eval.suites.stop_lines import StopLineSuite, compare_runs
+from selfplaydrive.eval.suites.stop_signs import StopSignSuite
 from selfplaydrive.eval.suites.turn_lanes import TurnLaneSuite
 from selfplaydrive.maps.roadmap import RoadMap
 
 PAPER_COUNTS = {"turn_lanes": 128, "stop_lines": 63, "crosswalks": 64}  # section 5.3
+# the failure modes of sections 5.1-5.2 (no paper counts: sized like the section 5.3 suites)
+FAILURE_COUNTS = {"red_lights": 64, "stop_signs": 32, "spawn_sanity": 200}
 
 
 def default_suites() -> dict[str, Any]:
-    """The three suites with their default settings, by name."""
-    return {"turn_lanes": TurnLaneSuite(), "stop_lines": StopLineSuite(), "crosswalks": CrosswalkSuite()}
+    """Every suite with its default settings, by name."""
+    return {
+        "turn_lanes": TurnLaneSuite(),
+        "stop_lines": StopLineSuite(),
+        "crosswalks": CrosswalkSuite(),
+        "red_lights": RedLightSuite(),
+        "stop_signs": StopSignSuite(),
+        "spawn_sanity": SpawnSanitySuite(),
+    }
 
 
 def generate_all(suite, maps: Sequence[RoadMap], count: int, rng: np.random.Generator) -> list[SuiteScenario]:
@@ -48,7 +61,8 @@ def run_all_suites(
     Args:
         maps: The map(s) to build scenarios on (counts are split evenly over them).
         policy: Factory `policy(env) -> act` (see `run_suite`), e.g. `RuleBasedDriver`.
-        counts: Scenarios per suite (sites for the crosswalk suite, each run in both variants);
+        counts: Scenarios per suite (sites for the crosswalk suite, each run in both variants;
+            conflicts for the stop-sign suite, each run with and without cross traffic);
             default `PAPER_COUNTS`. A suite left out is not run.
         seed: Seed of scenario generation and env resets.
         batch_size: Worlds stepped together.
@@ -77,6 +91,7 @@ def run_all_suites(
         start = time.perf_counter()
         items = generate_all(suite, maps, int(counts[name]), rng)
         runs = "2 runs (stop lines shown, hidden)" if name == "stop_lines" else "1 run"
+        runs = runs if getattr(suite, "needs_policy", True) else "checked without driving"
         say(f"suites: {name}: {len(items)} scenarios generated (count={int(counts[name])}), {runs} ...")
         out[name] = _run_one(name, suite, items, int(counts[name]), env, policy, batch_size, seed)
         say(f"suites: {name}: done in {time.perf_counter() - start:.1f} s")
@@ -93,11 +108,13 @@ def _run_one(
     batch_size: int,
     seed: int,
 ) -> dict[str, Any]:
-    """Drive and classify one suite's scenarios (the stop-line suite twice, see `run_all_suites`)."""
-    results = [
-        suite.classify(i, t)
-        for i, t in zip(items, run_suite(env, policy, items, batch_size, seed=seed), strict=True)
-    ]
+    """Drive and classify one suite's scenarios (the stop-line suite twice, see `run_all_suites`;
+    a suite with `needs_policy = False` classifies its scenarios as generated)."""
+    if getattr(suite, "needs_policy", True):
+        trajs = run_suite(env, policy, items, batch_size, seed=seed)
+    else:
+        trajs = [None] * len(items)
+    results = [suite.classify(i, t) for i, t in zip(items, trajs, strict=True)]
     entry: dict[str, Any] = {
         "requested": requested,
         "generated": len(items),

@@ -2,9 +2,11 @@
 
 `ScriptedDriver` makes every agent follow a given polyline (pure pursuit through the bicycle
 model of section 2.6) at a cruise speed, optionally holding still before an arc length until
-a release time. The plan builders below produce the behaviours the classifiers must tell
-apart: a lane change right after the start versus a turn from the wrong lane; yielding versus
-not yielding at a stop line or a crosswalk.
+a release time, or slowing to a crawl over a stretch. The plan builders below produce the
+behaviours the classifiers must tell apart: a lane change right after the start versus a turn
+from the wrong lane; yielding versus not yielding at a stop line or a crosswalk; waiting at a
+red light, running it, or going around its line through the oncoming lane; a full, a rolling
+or no stop at a stop sign.
 """
 
 from __future__ import annotations
@@ -16,8 +18,11 @@ import numpy as np
 
 from selfplaydrive.eval.suites.base import SuiteScenario
 from selfplaydrive.eval.suites.geometry import cumlen, cut, join, point_at, project
+from selfplaydrive.eval.suites.red_lights import SWERVE
+from selfplaydrive.eval.suites.shapes import offset_path
 
 BRAKE = 3.0  # [m/s^2] deceleration used to stop at a hold point
+ROLL_SPEED = 1.5  # [m/s] crawl of the rolling stop: between the stop and rolling thresholds
 
 
 @dataclass
@@ -29,12 +34,15 @@ class Plan:
         speed: Cruise speed [m/s].
         hold_arc: Arc length [m] along `path` where the centre stops, None for no stop.
         release_s: Time [s] from which the hold is lifted.
+        slow: (from_arc, to_arc, speed): the centre is at most `speed` [m/s] from `from_arc` to
+            `to_arc` [m] (braking at `BRAKE` before it), None for no slow stretch.
     """
 
     path: np.ndarray
     speed: float
     hold_arc: float | None = None
     release_s: float = float("inf")
+    slow: tuple[float, float, float] | None = None
 
 
 PlanFn = Callable[[SuiteScenario], Sequence[Plan | None]]
@@ -80,6 +88,8 @@ def _control(plan: Plan, st, i: int, t: float) -> tuple[float, float]:
     if plan.hold_arc is not None and t < plan.release_s:
         gap = max(plan.hold_arc - s, 0.0)
         target = min(target, np.sqrt(2.0 * BRAKE * gap)) if gap > 0.3 else 0.0
+    if plan.slow is not None and s < plan.slow[1]:
+        target = min(target, np.sqrt(plan.slow[2] ** 2 + 2.0 * BRAKE * max(plan.slow[0] - s, 0.0)))
     accel = float(np.clip(2.0 * (target - v), -4.0, 4.0))
     ld = max(4.0, 0.8 * v + 2.0)
     tgt, _ = point_at(plan.path, s + ld)
@@ -165,5 +175,59 @@ def crosswalk_plans(mode: str) -> PlanFn:
             plan.hold_arc = info["crosswalk_in_arc_m"] - info["ego_length_m"] / 2 - 2.0
             plan.release_s = info["ped_delay_s"] + info["ped_to_crossing_m"] / info["ped_speed_mps"] + 6.0
         return [plan]
+
+    return plans
+
+
+def red_light_plans(mode: str) -> PlanFn:
+    """Red lights: "comply" holds its front 4 m before the line and waits (it stops ~2 m
+    before: the controller overshoots a hold point by ~1.7 m from 8 m/s); "run" keeps
+    its speed along its lane; "bypass" moves left onto the oncoming lane between `SWERVE` m
+    (35 m and 15 m) before the line and drives on through the junction there (the paper's reward hack,
+    section 5.1). Bypass needs the scenario's `oncoming_offset_m`."""
+    if mode not in ("comply", "run", "bypass"):
+        raise ValueError(f"mode: expected 'comply', 'run' or 'bypass', got {mode!r}")
+
+    def plans(item: SuiteScenario) -> list[Plan]:
+        info, path = item.info, item.paths["ego"]
+        v, line = float(info["speed_mps"]), float(info["line_arc_m"])
+        if mode == "comply":
+            return [Plan(path, v, hold_arc=line - info["ego_length_m"] / 2 - 4.0)]
+        if mode == "run":
+            return [Plan(path, v)]
+        if info["oncoming_offset_m"] is None:
+            raise ValueError(f"bypass: scenario at light line {info['light_line']} has no oncoming lane")
+        ramp = (line - SWERVE[0], line - SWERVE[1])
+        return [Plan(offset_path(path, float(info["oncoming_offset_m"]), ramp), v)]
+
+    return plans
+
+
+def stop_sign_plans(mode: str) -> PlanFn:
+    """Stop signs (slot 1 behind the line, slot 0 the cross traffic when present): "full"
+    holds its front 3.5 m before the line (it stops ~2 m before it) until 5 s after the
+    conflict time while the cross traffic keeps its speed; "rolling" crawls at `ROLL_SPEED`
+    from 2 m before the line until its centre reaches it; "none" keeps its speed. In the last
+    two the cross traffic waits 15 m before the conflict point until 10 s after the conflict
+    time, so nobody collides."""
+    if mode not in ("full", "rolling", "none"):
+        raise ValueError(f"mode: expected 'full', 'rolling' or 'none', got {mode!r}")
+
+    def plans(item: SuiteScenario) -> list[Plan | None]:
+        info, sc = item.info, item.scenario
+        T, line = float(info["time_to_conflict_s"]), float(info["stop_arc_m"])
+        half = float(sc.agent_length[1]) / 2
+        side = Plan(item.paths["side"], float(info["side_speed_mps"]))
+        if mode == "full":
+            side.hold_arc, side.release_s = line - half - 3.5, T + 5.0
+        elif mode == "rolling":
+            side.slow = (line - half - 2.0, line, ROLL_SPEED)
+        if not sc.agent_valid[0]:
+            return [None, side]
+        main = Plan(item.paths["main"], float(info["main_speed_mps"]))
+        if mode != "full":
+            main.hold_arc = info["main_conflict_arc_m"] - 15.0 - float(sc.agent_length[0]) / 2
+            main.release_s = T + 10.0
+        return [main, side]
 
     return plans
