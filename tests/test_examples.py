@@ -165,3 +165,14 @@ def test_05_ablation_runs_and_reads_the_logs(tmp_path):
     assert set(rows) >= {f"term/{t}" for t in TERMS} | {"charts/collision_rate"}
     assert all(len(v) == 2 for v in rows.values())
     assert float(rows["term/offroad"][0]) <= 0.0 and 0.0 <= float(rows["charts/collision_rate"][1]) <= 1.0
+
+
+# --- 06-08: one reward term, three forms ---------------------------------------------------
+@pytest.mark.parametrize("name", ["06_term_python.py", "07_term_numba.py", "08_term_cython.py"])
+def test_06_08_speed_limit_term_runs(name, tmp_path):
+    if name == "07_term_numba.py":
+        pytest.importorskip("numba")
+    out = run_example(name, tmp_path)
+    assert "reward columns of" in out and "  speed_limit " in out
+    for term in TERMS:
+        assert f"  {term} " in out, term

@@ -70,9 +70,10 @@ cdef class World:
         state: Buffers named as the `Sim` fields (sim/buffers.py allocates them).
         atlas: Concatenated map arrays named as the `Atlas` fields (sim/atlas.py).
         params: Scalars named as the `Params` fields plus accel_table, steer_table, coeff_scale.
-        terms: One (address, args, weight) per column of the `terms` buffer, in column order:
-            the address of an `sd_reward_term_fn` (selfplaydrive_abi.h) or 0 for a column
-            filled in Python after the step, its float32 parameters (or None) and its weight.
+        terms: One (address, args, weight, native) per column of the `terms` buffer, in column
+            order: the address of an `sd_reward_term_fn` (selfplaydrive_abi.h) or 0 for no call
+            (a Python column, or one a group written earlier fills), its float32 parameters
+            (or None), its weight, and 1 when the step fills it (0: Python, after the step).
             rewards/components.py `LinearReward.plan` makes them and checks the addresses.
     """
 
@@ -104,8 +105,9 @@ cdef class World:
             raise ValueError(f"buffers terms / term_sum: expected ({N}, {M}) and ({self.sim.W}, {M}), got "
                              f"{s['terms'].shape} and {s['term_sum'].shape}")
         for k in range(M):
-            address, args, weight = terms[k]
+            address, args, weight, native = terms[k]
             self.slots[k].fn = <reward_term_fn>address
+            self.slots[k].native = native
             self.slots[k].args = NULL
             if args is not None:
                 self.slots[k].args = <const float*>ptr({"args": args}, "args", np.float32, self.keep)

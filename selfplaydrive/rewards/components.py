@@ -18,6 +18,7 @@ weighted columns, and each column has its own episode sum (`pop_episode_stats()[
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -143,7 +144,8 @@ Term = Union[KernelTerm, RewardHook]
 
 
 # the registry ------------------------------------------------------------------------------
-def _paper_terms() -> dict[str, Term]:
+@functools.lru_cache(maxsize=1)
+def _paper_terms() -> dict[str, KernelTerm]:
     from selfplaydrive._sim import reward as kernels
 
     addresses = kernels.paper_term_addresses()
@@ -278,16 +280,33 @@ class LinearReward:
         _check_width(len(out.columns))
         return out
 
-    def plan(self) -> list[tuple[int, np.ndarray | None, float]]:
-        """(address, float32 args or None, weight) per column for the step (`_sim.world.World`);
-        address 0 marks a Python column."""
-        out = []
+    def plan(self) -> list[tuple[int, np.ndarray | None, float, int]]:
+        """(address, float32 args or None, weight, native) per column for the step
+        (`_sim.world.World`); address 0: no call for that column (a Python column, native 0,
+        or one filled by a group call of an earlier column).
+
+        Where the paper's eight built-in terms are selected next to each other in their order
+        (the default), one call of the library's 8-column component writes all eight in a single
+        pass over the world's agents instead of eight passes: same values, bit for bit, and the
+        paper configuration costs what it cost before the components (docs/benchmarks.md).
+        """
+        out: list[tuple[int, np.ndarray | None, float, int]] = []
         for c in self.columns:
             if isinstance(c.term, KernelTerm):
                 args = np.asarray(c.term.args, dtype=np.float32) if c.term.args else None
-                out.append((c.term.address, args, c.weight))
+                out.append((c.term.address, args, c.weight, 1))
             else:
-                out.append((0, None, c.weight))
+                out.append((0, None, c.weight, 0))
+        paper = [_paper_terms()[name] for name in TERM_NAMES]
+        for k in range(len(self.columns) - len(paper) + 1):
+            run = [c.term for c in self.columns[k : k + len(paper)]]
+            if all(isinstance(t, KernelTerm) and t.address == p.address and not t.args for t, p in zip(run, paper)):
+                from selfplaydrive._sim.reward import paper_group_address
+
+                out[k] = (int(paper_group_address()), None, out[k][2], 1)
+                for j in range(k + 1, k + len(paper)):
+                    out[j] = (0, None, out[j][2], 1)
+                break
         return out
 
     def __repr__(self) -> str:
