@@ -20,7 +20,13 @@ TERMS = ("waypoint", "collision", "offroad", "red_light", "comfort", "center", "
 
 def run_example(name: str, tmp_path: Path, via_env: bool = False, timeout: float = 240) -> str:
     """Run examples/<name> in its tiny setting (--tiny, or the environment variable)."""
+    import selfplaydrive
+
     env = dict(os.environ)
+    # the examples run against the selfplaydrive under test (a source tree first on sys.path
+    # here may differ from the installed one)
+    root = str(Path(selfplaydrive.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
     args = [sys.executable, str(EXAMPLES / name)]
     if via_env:
         env["SELFPLAYDRIVE_EXAMPLE_TINY"] = "1"
