@@ -5,15 +5,18 @@ variant alike:
 
 overhead   The paper configuration stepped by this tree and by a baseline tree (another build
            of selfplaydrive, e.g. the commit before the components), in alternating child
-           processes: agent-steps per CPU-second and per wall-clock second of each, and their
-           ratio. The baseline tree is a folder holding a built `selfplaydrive` package:
+           processes: agent-steps per CPU-second and per wall-clock second of each, their
+           ratio, and the median per-step time of the whole step and of the reward stage
+           alone (a second run with `profile=True`). The baseline tree is a folder holding a
+           built `selfplaydrive` package:
                git worktree add /tmp/base <commit> && cd /tmp/base && \
                    python setup.py build_ext --inplace -j 2
 terms      The cost of one extra term column in each form: a built-in term of similar work (the
            paper's off-road term again), the speed-limit term of examples 06-08 as numba cfunc,
            as Cython package (built into a temporary folder), and in Python/NumPy. Compiled
            terms are timed in the reward stage (`VecEnv(profile=True)`), the Python term in the
-           whole step; cost = time with the term - time without, per agent-step.
+           whole step; cost = time with the term - time without, per agent-step (medians of
+           per-step times, then of rounds).
 
 Usage:
     python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--json]
@@ -52,20 +55,43 @@ acts = np.random.default_rng(0).integers(0, [7, 13], size=(steps + warmup, env.n
 env.reset(0)
 for k in range(warmup):
     env.step(acts[k])
-n = 0
+n, per_step = 0, []
 c0, t0 = time.process_time(), time.perf_counter()
 for k in range(warmup, warmup + steps):
-    n += int(np.count_nonzero(env.masks))
+    m = int(np.count_nonzero(env.masks))
+    n += m
+    s0 = time.perf_counter()
     env.step(acts[k])
+    per_step.append((time.perf_counter() - s0) / m * 1e9)
 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+# the reward stage alone: profile mode times each stage in its own parallel loop
+env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=threads, profile=True)
+env.reset(0)
+for k in range(warmup):
+    env.step(acts[k])
+stage = []
+for k in range(warmup, warmup + steps):
+    m = int(np.count_nonzero(env.masks))
+    r0 = env.timings["reward"]
+    env.step(acts[k])
+    stage.append((env.timings["reward"] - r0) / m * 1e9)
 import selfplaydrive
-print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "package": selfplaydrive.__file__}))
+print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "median_step_ns": float(np.median(per_step)),
+                  "median_reward_stage_ns": float(np.median(stage)), "package": selfplaydrive.__file__}))
 """
 
 
 def _child(tree: Path, args: argparse.Namespace) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(tree))
-    cmd = [sys.executable, "-c", CHILD, str(args.worlds), str(args.threads), str(args.steps), str(args.warmup)]
+    cmd = [
+        sys.executable,
+        "-c",
+        CHILD,
+        str(args.worlds),
+        str(args.threads),
+        str(args.steps),
+        str(args.warmup),
+    ]
     with tempfile.TemporaryDirectory() as tmp:  # no source tree in the working directory
         out = subprocess.run(cmd, cwd=tmp, env=env, capture_output=True, text=True, check=True).stdout
     r = json.loads(out.strip().splitlines()[-1])
@@ -87,11 +113,17 @@ def overhead(args: argparse.Namespace) -> dict[str, object]:
         out[name] = {
             "agent_steps_per_cpu_s": statistics.median(x["agent_steps"] / x["cpu"] for x in rs),
             "agent_steps_per_s": statistics.median(x["agent_steps"] / x["wall"] for x in rs),
+            "median_step_ns_per_agent": statistics.median(x["median_step_ns"] for x in rs),
+            "median_reward_stage_ns_per_agent": statistics.median(x["median_reward_stage_ns"] for x in rs),
         }
     pairs = zip(runs["baseline"], runs["components"], strict=True)
     ratios = [(b["agent_steps"] / b["cpu"]) / (c["agent_steps"] / c["cpu"]) for b, c in pairs]
     out["cpu_time_ratio_per_round"] = ratios  # components' CPU time per agent-step / baseline's
     out["cpu_time_ratio_median"] = statistics.median(ratios)
+    # medians of per-step wall times (robust to other processes on a shared machine)
+    out["median_step_ratio"] = (
+        out["components"]["median_step_ns_per_agent"] / out["baseline"]["median_step_ns_per_agent"]
+    )
     return out
 
 
@@ -131,19 +163,25 @@ def _time_variant(road_map, term, args: argparse.Namespace) -> tuple[float, floa
     from selfplaydrive.sim.vec_env import VecEnv
 
     weights = {n: 1.0 for n in TERM_NAMES}
-    reward = LinearReward(weights) if term is None else LinearReward({**weights, term.name: 1.0}, terms=[term])
-    env = VecEnv(road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, reward=reward, profile=True)
+    reward = (
+        LinearReward(weights) if term is None else LinearReward({**weights, term.name: 1.0}, terms=[term])
+    )
+    env = VecEnv(
+        road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, reward=reward, profile=True
+    )
     acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
     env.reset(0)
     for k in range(args.warmup):
         env.step(acts[k])
-    before = env.timings["reward"]
-    n, t0 = 0, time.perf_counter()
+    # medians of per-step times: robust to other processes taking the core now and then
+    stage, step = [], []
     for k in range(args.warmup, args.warmup + args.steps):
-        n += int(np.count_nonzero(env.masks))
+        n = int(np.count_nonzero(env.masks))
+        r0, t0 = env.timings["reward"], time.perf_counter()
         env.step(acts[k])
-    wall = time.perf_counter() - t0
-    return (env.timings["reward"] - before) / n * 1e9, wall / n * 1e9
+        step.append((time.perf_counter() - t0) / n * 1e9)
+        stage.append((env.timings["reward"] - r0) / n * 1e9)
+    return float(np.median(stage)), float(np.median(step))
 
 
 def terms(args: argparse.Namespace) -> dict[str, object]:

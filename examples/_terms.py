@@ -31,7 +31,9 @@ def drive(term: object, weight: float = 1.0, small: bool = False, seed: int = 0)
         # mostly accelerating (indices 4-6 of the 7 accelerations), straight-ish steering
         env.step(np.stack([rng.integers(4, 7, env.num_agents), rng.integers(4, 9, env.num_agents)], axis=1))
         sums += env.reward_terms[env.reward_mask].sum(axis=0)
-    print(f"reward columns of {env.num_agents} agents over {steps} steps ({term.name}: {type(term).__name__})")
+    print(
+        f"reward columns of {env.num_agents} agents over {steps} steps ({term.name}: {type(term).__name__})"
+    )
     for name, value in zip(env.term_names, sums, strict=True):
         print(f"  {name:12s} {value:+12.5f}")
     sys.stdout.flush()

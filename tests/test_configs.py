@@ -20,7 +20,15 @@ from selfplaydrive.errors import ConfigError
 _LOGGER_ARGS = {"run_dir", "total_updates", "progress_bar", "enabled", "initial"}
 BUILDER_ARGS = {
     # `reward` (the LinearReward) comes from the reward group's `terms` key
-    "selfplaydrive.sim.vec_env.VecEnv": {"maps", "spawner", "physics", "obs", "reward", "reward_hooks", "obs_hooks"},
+    "selfplaydrive.sim.vec_env.VecEnv": {
+        "maps",
+        "spawner",
+        "physics",
+        "obs",
+        "reward",
+        "reward_hooks",
+        "obs_hooks",
+    },
     "selfplaydrive.trainers.ppo.logging.TensorBoardLogger": _LOGGER_ARGS,
     "selfplaydrive.trainers.ppo.logging.JsonlLogger": _LOGGER_ARGS,
     "selfplaydrive.trainers.ppo.logging.ProgressLogger": _LOGGER_ARGS,

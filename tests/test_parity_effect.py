@@ -158,7 +158,8 @@ def _actions(env, rng):
 
 def kernel_view(env) -> dict[str, str]:
     """Digests of everything the kernels read: dims, kernel parameters (action tables
-    included), the reward terms and weights, the map atlas, every buffer after the reset and after `STEPS` random steps."""
+    included), the reward terms and weights, the map atlas, every buffer after the reset and
+    after `STEPS` random steps."""
     view = {f"dims.{k}": repr(v) for k, v in vars(env.dims).items()}
     view.update({f"param.{k}": _digest(v) for k, v in env._kernel_params().items()})
     # the reward stage's component table (World's `terms` argument): addresses and weights

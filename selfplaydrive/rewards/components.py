@@ -23,7 +23,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +63,9 @@ class KernelTerm:
     def __post_init__(self) -> None:
         _check_name(self.name)
         if not isinstance(self.address, int) or isinstance(self.address, bool) or self.address <= 0:
-            raise ConfigError(f"reward term {self.name!r}: address must be a positive integer, got {self.address!r}")
+            raise ConfigError(
+                f"reward term {self.name!r}: address must be a positive integer, got {self.address!r}"
+            )
         args = tuple(float(a) for a in self.args)
         if not all(math.isfinite(a) for a in args):
             raise ConfigError(f"reward term {self.name!r}: args must be finite numbers, got {self.args!r}")
@@ -97,7 +99,9 @@ class KernelTerm:
                 f"reward term {name!r}: the cfunc's signature is {sig}, expected {numba_abi.SIGNATURE} "
                 f"(numba_abi.SIGNATURE, the C signature {SIGNATURE})"
             )
-        return cls(name, int(cfunc.address), tuple(args), "numba", doc or (cfunc.__doc__ or "").strip(), cfunc)
+        return cls(
+            name, int(cfunc.address), tuple(args), "numba", doc or (cfunc.__doc__ or "").strip(), cfunc
+        )
 
     @classmethod
     def from_cython(
@@ -140,7 +144,7 @@ class KernelTerm:
         return cls(name, address, tuple(args), "cython", doc, owner if owner is not None else capsule)
 
 
-Term = Union[KernelTerm, RewardHook]
+Term = KernelTerm | RewardHook
 
 
 # the registry ------------------------------------------------------------------------------
@@ -150,7 +154,9 @@ def _paper_terms() -> dict[str, KernelTerm]:
 
     addresses = kernels.paper_term_addresses()
     return {
-        t.name: KernelTerm(t.name, int(addresses[t.name]), (), "builtin", f"{t.formula} when {t.when}", kernels)
+        t.name: KernelTerm(
+            t.name, int(addresses[t.name]), (), "builtin", f"{t.formula} when {t.when}", kernels
+        )
         for t in TERMS
     }
 
@@ -248,7 +254,9 @@ class LinearReward:
         if weights is None:
             weights = {name: 1.0 for name in TERM_NAMES}
         if not isinstance(weights, Mapping) or not weights:
-            raise ConfigError(f"reward weights: expected a non-empty mapping of term name -> weight, got {weights!r}")
+            raise ConfigError(
+                f"reward weights: expected a non-empty mapping of term name -> weight, got {weights!r}"
+            )
         columns = []
         for name, weight in weights.items():
             if name not in local and name not in _registry():
@@ -300,7 +308,10 @@ class LinearReward:
         paper = [_paper_terms()[name] for name in TERM_NAMES]
         for k in range(len(self.columns) - len(paper) + 1):
             run = [c.term for c in self.columns[k : k + len(paper)]]
-            if all(isinstance(t, KernelTerm) and t.address == p.address and not t.args for t, p in zip(run, paper)):
+            if all(
+                isinstance(t, KernelTerm) and t.address == p.address and not t.args
+                for t, p in zip(run, paper, strict=True)
+            ):
                 from selfplaydrive._sim.reward import paper_group_address
 
                 out[k] = (int(paper_group_address()), None, out[k][2], 1)
@@ -379,4 +390,6 @@ def _builtin_capsule_signature() -> str:
 
 
 def _normalise(sig: str) -> str:
-    return " ".join(sig.replace("*", " * ").replace(",", " , ").replace("(", " ( ").replace(")", " ) ").split())
+    return " ".join(
+        sig.replace("*", " * ").replace(",", " , ").replace("(", " ( ").replace(")", " ) ").split()
+    )

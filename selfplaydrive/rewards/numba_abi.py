@@ -63,7 +63,7 @@ def struct_fields(struct: str, header: str | None = None) -> list[tuple[str, str
     """(field name, C type) of `typedef struct sd_<struct>` in the header, in declaration order."""
     with open(header or header_path()) as f:
         text = re.sub(r"/\*.*?\*/", "", f.read(), flags=re.S)
-    m = re.search(r"typedef struct sd_%s \{(.*?)\} sd_%s;" % (struct, struct), text, flags=re.S)
+    m = re.search(rf"typedef struct sd_{struct} \{{(.*?)\}} sd_{struct};", text, flags=re.S)
     if m is None:
         raise LookupError(f"selfplaydrive_abi.h declares no struct sd_{struct}")
     fields = []

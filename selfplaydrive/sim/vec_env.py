@@ -69,8 +69,8 @@ class VecEnv:
             most `MAX_THREADS`.
         terminated_vehicle: "remove" or "obstacle" (stays as a static obstacle).
         reward: The reward terms and their weights (`LinearReward`, or its mapping of term name
-            to weight; default: the paper's eight terms, weight 1, section 2.3). Compiled terms run inside the parallel step, Python
-            terms after it; one column each.
+            to weight; default: the paper's eight terms, weight 1, section 2.3). Compiled terms
+            run inside the parallel step, Python terms after it; one column each.
         reward_hooks: Python reward terms appended to `reward` with weight 1.
         obs_hooks: Python observation features appended after the kernel columns.
         profile: Time each stage (slower: one parallel loop per stage).
@@ -151,7 +151,9 @@ class VecEnv:
         self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]
         self.buffers = allocate(self.dims)
         self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
-        self._world = World(self.dims.__dict__, self.buffers, self.atlas, self._kernel_params(), self.reward.plan())
+        self._world = World(
+            self.dims.__dict__, self.buffers, self.atlas, self._kernel_params(), self.reward.plan()
+        )
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
         self.dropped_episode_stats = 0  # records discarded past MAX_EPISODE_STATS
@@ -409,8 +411,8 @@ def _reward(reward: object) -> LinearReward:
         return LinearReward(reward)
     if not isinstance(reward, LinearReward):
         raise ConfigError(
-            f"reward: expected a LinearReward (selfplaydrive.rewards.LinearReward({{'collision': 1.0, ...}})), "
-            f"got {type(reward).__name__}"
+            "reward: expected a LinearReward (selfplaydrive.rewards.LinearReward({'collision': 1.0, ...})) "
+            f"or a mapping of term name -> weight, got {type(reward).__name__}"
         )
     return reward
 

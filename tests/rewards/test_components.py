@@ -74,7 +74,14 @@ def rollout(road_map, reward=None, steps=60, threads=1, worlds=3, **kw):
     h, terms = hashlib.sha256(), []
     for _ in range(steps):
         env.step(np.stack([rng.integers(3, 7, env.num_agents), rng.integers(0, 13, env.num_agents)], axis=1))
-        for a in (env.observations, env.rewards, env.reward_terms, env.terminations, env.truncations, env.masks):
+        for a in (
+            env.observations,
+            env.rewards,
+            env.reward_terms,
+            env.terminations,
+            env.truncations,
+            env.masks,
+        ):
             h.update(np.ascontiguousarray(a).tobytes())
         terms.append(env.reward_terms.copy())
     return h.hexdigest(), np.stack(terms), env
@@ -102,7 +109,7 @@ def test_three_forms_of_one_term_agree(road_map, numba_term, cython_term):
     paper = {n: 1.0 for n in TERM_NAMES}
     cols = {}
     for form, term in (("python", SpeedLimit()), ("numba", numba_term), ("cython", cython_term)):
-        digest, terms, env = rollout(road_map, LinearReward({**paper, "speed_limit": 1.0}, terms=[term]))
+        _, terms, env = rollout(road_map, LinearReward({**paper, "speed_limit": 1.0}, terms=[term]))
         assert env.term_names[-1] == "speed_limit"
         cols[form] = terms[:, :, -1]
     assert (cols["python"] < 0).sum() > 50  # the term is not trivially zero
@@ -111,7 +118,9 @@ def test_three_forms_of_one_term_agree(road_map, numba_term, cython_term):
 
 
 def test_compiled_terms_are_deterministic_across_threads(road_map, numba_term, cython_term):
-    reward = LinearReward({"collision": 1.0, "speed_limit": 0.5, "sl2": 2.0}, terms=[numba_term, cython_term.renamed("sl2")])
+    reward = LinearReward(
+        {"collision": 1.0, "speed_limit": 0.5, "sl2": 2.0}, terms=[numba_term, cython_term.renamed("sl2")]
+    )
     one, terms, _ = rollout(road_map, reward, threads=1)
     assert one == rollout(road_map, reward, threads=2)[0]
     np.testing.assert_allclose(terms[:, :, 2], 4.0 * terms[:, :, 1], rtol=1e-6)  # weights 0.5 and 2
@@ -140,7 +149,9 @@ def test_a_python_term_replaces_a_registered_one(road_map):
             return np.where(hit, -c * (np.float32(1.0) + np.float32(0.1) * state.speed), 0).astype(np.float32)
 
     _, base, _ = rollout(road_map, steps=80)
-    _, replaced, env = rollout(road_map, LinearReward({n: 1.0 for n in TERM_NAMES}, terms=[Collision()]), steps=80)
+    _, replaced, env = rollout(
+        road_map, LinearReward({n: 1.0 for n in TERM_NAMES}, terms=[Collision()]), steps=80
+    )
     assert not env.reward.columns[1].native and env.term_names == TERM_NAMES
     k = TERM_NAMES.index("collision")
     assert (base[:, :, k] < 0).sum() > 0
@@ -220,9 +231,9 @@ def test_abi_declarations_ship_with_the_package_and_agree():
     pxd = (inc / "selfplaydrive_abi.pxd").read_text()
     text = re.sub(r"/\*.*?\*/", "", header, flags=re.S)
     for struct, cname in (("Sim", "sim"), ("Params", "params"), ("Atlas", "atlas")):
-        body = re.search(r"typedef struct sd_%s \{(.*?)\}" % cname, text, flags=re.S).group(1)
+        body = re.search(rf"typedef struct sd_{cname} \{{(.*?)\}}", text, flags=re.S).group(1)
         c_fields = [" ".join(d.split()).replace(" *", "*") for d in body.split(";") if d.strip()]
-        block = re.search(r'ctypedef struct %s "sd_%s":\n((?:        .*\n)+)' % (struct, cname), pxd).group(1)
+        block = re.search(rf'ctypedef struct {struct} "sd_{cname}":\n((?:        .*\n)+)', pxd).group(1)
         pxd_fields = [" ".join(line.split()) for line in block.splitlines()]
         assert c_fields == pxd_fields, struct
     for name in re.findall(r"\bSD_([A-Z_0-9]+) = ", header):
@@ -232,6 +243,7 @@ def test_abi_declarations_ship_with_the_package_and_agree():
 def test_numba_view_has_the_c_layout():
     pytest.importorskip("numba")
     from selfplaydrive._sim.reward import abi_sizes
+
     from selfplaydrive.rewards.numba_abi import struct_dtype
 
     sizes = abi_sizes()

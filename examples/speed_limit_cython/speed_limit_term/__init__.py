@@ -7,7 +7,6 @@ R = -coef * max(v - limit, 0) per step, v the speed [m/s]: the same term as the 
 from __future__ import annotations
 
 from selfplaydrive.rewards import KernelTerm
-
 from speed_limit_term import _kernel
 
 
