@@ -34,7 +34,7 @@ from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
-from selfplaydrive.rewards.components import LinearReward
+from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
@@ -305,7 +305,9 @@ class VecEnv:
         b = self.buffers
         for k in self._python_columns:
             col = self.reward.columns[k]
-            r = np.asarray(col.term(self.state), dtype=np.float32)
+            term = col.term
+            assert not isinstance(term, KernelTerm)  # _python_columns holds the Python terms
+            r = np.asarray(term(self.state), dtype=np.float32)
             if r.shape != (self.num_agents,):
                 raise ValueError(
                     f"reward term {col.name!r}: expected an output of shape ({self.num_agents},) "
