@@ -24,8 +24,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from selfplaydrive._sim.spatial import query_radius_batch
 
+from selfplaydrive._sim.spatial import query_radius_batch
 from selfplaydrive.maps.cache import load_roadmap, save_roadmap
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.maps.roadmap import RoadMap, SegmentType

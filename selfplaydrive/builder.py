@@ -157,8 +157,8 @@ def _linear_reward(terms: Any) -> Any:
 
     from selfplaydrive.rewards.components import LinearReward
 
-    weights = OmegaConf.to_container(terms, resolve=True) if OmegaConf.is_config(terms) else terms
-    return LinearReward(weights)
+    weights: Any = OmegaConf.to_container(terms, resolve=True) if OmegaConf.is_config(terms) else terms
+    return LinearReward(weights)  # it checks the mapping and names the bad key
 
 
 def make_env(
@@ -197,7 +197,7 @@ def make_env(
     from selfplaydrive.scenario.spawner import PaperSpawner
     from selfplaydrive.sim.vec_env import VecEnv
 
-    items = map if isinstance(map, (list, tuple)) else [map]
+    items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
     from selfplaydrive.rewards.components import LinearReward
 

@@ -3,8 +3,9 @@
 ``main`` only picks the command and hands the rest of the argument list to that command's
 function, so each command parses its own arguments: argparse here (``map``), Hydra overrides
 and ``-m`` sweeps for ``train``, ``eval``, ``render`` and ``bench`` (selfplaydrive/hydra_app.py,
-configs in selfplaydrive/conf/). Exit codes: 0 success, 1 a map/config error (message on
-stderr), 2 bad usage.
+configs in selfplaydrive/conf/). Exit codes: 0 success, 1 a map/config/checkpoint error or a
+missing optional dependency (one line on stderr; HYDRA_FULL_ERROR=1 shows the traceback), 2 bad
+usage.
 
 Examples::
 
@@ -20,14 +21,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
-from selfplaydrive.errors import ConfigError, MapError
+from selfplaydrive.errors import CheckpointError, ConfigError, MapError, MissingExtraError
 
 if TYPE_CHECKING:  # the map stack (numpy, shapely ...) is imported only by the commands that need it
     from selfplaydrive.maps.roadmap import RoadMap
+
+# errors that are the user's input or installation, reported in one line (not a traceback)
+USER_ERRORS = (ConfigError, MapError, CheckpointError, MissingExtraError)
 
 MAP_INFO_KEYS = (
     "lane_km",
@@ -143,7 +148,9 @@ def cmd_map(argv: Sequence[str]) -> int:
     args = _map_parser().parse_args(list(argv))
     try:
         return args.func(args)
-    except (MapError, ConfigError) as exc:
+    except USER_ERRORS as exc:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
         print(f"selfplaydrive map {args.action}: error: {exc}", file=sys.stderr)
         return 1
 
@@ -211,7 +218,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    return COMMANDS[argv[0]][0](argv[1:])
+    try:
+        return COMMANDS[argv[0]][0](argv[1:])
+    except USER_ERRORS as exc:  # e.g. importing a command's module needs a missing extra
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
+        print(f"selfplaydrive {argv[0]}: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ and `-m` multirun. Each run folder gets the resolved config, the git commit and 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from selfplaydrive.builder import CONFIG_MODULE, compose
-from selfplaydrive.errors import ConfigError, MapError
+from selfplaydrive.errors import CheckpointError, ConfigError, MapError, MissingExtraError
 
 # Hydra's own command-line flags (hydra/_internal/utils.py get_args_parser)
 HYDRA_FLAGS = {
@@ -22,14 +23,84 @@ HYDRA_FLAGS = {
 }  # fmt: skip
 
 
+# bench.yaml keys that must be integers, with their smallest value
+BENCH_COUNTS = {"steps": 1, "warmup": 0, "repeats": 1}
+
+
+def full_error() -> bool:
+    """Whether the user asked for full tracebacks (Hydra's HYDRA_FULL_ERROR=1)."""
+    return os.environ.get("HYDRA_FULL_ERROR") == "1"
+
+
+def one_line_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that are the user's input, not a bug: reported in one line, no traceback.
+
+    Our own errors, a missing optional dependency, and OmegaConf's and Hydra's errors on a bad
+    override value (a string where an int belongs, a missing mandatory value ...).
+    """
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    return (ConfigError, MapError, CheckpointError, MissingExtraError, OmegaConfBaseException, HydraException)
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of `exc` for the one-line report: OmegaConf's multi-line messages become
+    'key: first line' (their other lines repeat the key and the node type), Hydra's are joined
+    into one line; ours are kept (a ConfigError may list the valid choices below)."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    msg = str(exc).strip() or type(exc).__name__
+    if isinstance(exc, OmegaConfBaseException):
+        first = msg.splitlines()[0]
+        key = getattr(exc, "full_key", None)
+        return f"{key}: {first}" if key and not first.startswith(f"{key}:") else first
+    if isinstance(exc, HydraException):  # e.g. a parse error, then a line with the grammar's URL
+        return " ".join(line.strip() for line in msg.splitlines() if line.strip())
+    return msg
+
+
+def check_config(config_name: str, cfg: Any) -> None:
+    """Cheap checks of the values every command reads, so that a bad one fails in a line before
+    a map is loaded or a run folder is written.
+
+    Raises:
+        ConfigError: Naming the key, the value and what was expected.
+    """
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.sim.vec_env import MAX_THREADS, check_integer, check_seed
+
+    if "seed" in cfg:
+        check_seed(cfg.seed)
+    if "env" in cfg:
+        check_integer("env.num_worlds", cfg.env.num_worlds, 1)
+        check_integer("env.num_threads", cfg.env.num_threads, 1, MAX_THREADS)
+    if "map" in cfg:
+        nodes = list(cfg.map) if OmegaConf.is_list(cfg.map) else [cfg.map]
+        for node in nodes:
+            # `"spec" in node` is False for a missing value: ask the keys
+            if OmegaConf.is_dict(node) and "spec" in node.keys() and OmegaConf.is_missing(node, "spec"):
+                raise ConfigError(
+                    "map.spec: map=file needs the map file, e.g. map=file map.spec=path/to/map.osm "
+                    "(.osm Lanelet2, .xodr OpenDRIVE or a compiled .npz)"
+                )
+    if config_name == "bench":
+        for key, low in BENCH_COUNTS.items():
+            check_integer(key, cfg[key], low)
+        threads = list(cfg.threads) if OmegaConf.is_list(cfg.threads) else [cfg.threads]
+        for t in threads:
+            check_integer("threads", t, 1, MAX_THREADS)
+
+
 def check_overrides(config_name: str, argv: Sequence[str]) -> None:
     """Compose once with the first value of every sweep so that an unknown group option or key
-    fails before any run starts, with a `ConfigError` listing the valid choices."""
+    fails before any run starts, with a `ConfigError` listing the valid choices; then check the
+    values (`check_config`)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     overrides = [a for a in argv if not a.startswith("-") and "=" in a]
-    if not overrides:
-        return
     first = []
     for ov in OverridesParser.create().parse_overrides(overrides):
         key = ov.get_key_element()
@@ -38,7 +109,7 @@ def check_overrides(config_name: str, argv: Sequence[str]) -> None:
         else:
             value = ov.get_value_element_as_str()
         first.append(f"{key}={value}")
-    compose(config_name, first)
+    check_config(config_name, compose(config_name, first))
 
 
 def git_commit() -> str:
@@ -82,9 +153,11 @@ def run_hydra(
     """Run `task(cfg)` under Hydra with `argv` as the override list (supports `-m`).
 
     Returns:
-        The exit code: 0 when every run succeeded, 1 when a run raised a `ConfigError` or
-        `MapError` (its message goes to stderr; the other runs of a sweep still run), 2 on an
-        unknown command-line flag or when a run raised one of `usage_errors`.
+        The exit code: 0 when every run succeeded, 1 when a run raised a `ConfigError`,
+        `MapError`, `CheckpointError`, `MissingExtraError` or an OmegaConf / Hydra error on a bad
+        value (one line on stderr, no traceback; the other runs of a sweep still run), 2 on an
+        unknown command-line flag or when a run raised one of `usage_errors`. With
+        HYDRA_FULL_ERROR=1 these errors propagate with their full traceback.
     """
     import hydra
 
@@ -97,24 +170,30 @@ def run_hydra(
             file=sys.stderr,
         )
         return 2
+    user_errors = one_line_errors()
     try:
         check_overrides(config_name, argv)
-    except ConfigError as exc:
-        print(f"selfplaydrive {config_name}: error: {exc}", file=sys.stderr)
+    except user_errors as exc:
+        if full_error():
+            raise
+        print(f"selfplaydrive {config_name}: error: {one_line(exc)}", file=sys.stderr)
         return 1
     status = [0]
 
     @hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name=config_name, version_base="1.3")
     def _main(cfg: Any) -> Any:
         try:
+            check_config(config_name, cfg)  # each job of a sweep, before its task loads anything
             return task(cfg)
-        except (ConfigError, MapError) as exc:
+        except user_errors as exc:
             code = 1
             error = exc
         except usage_errors as exc:
             code = 2
             error = exc
-        print(f"selfplaydrive {config_name}: error: {error}", file=sys.stderr)
+        if full_error():
+            raise error
+        print(f"selfplaydrive {config_name}: error: {one_line(error)}", file=sys.stderr)
         status[0] = max(status[0], code)
         return None
 
@@ -130,7 +209,7 @@ def run_hydra(
 def train_task(cfg: Any) -> dict[str, Any]:
     """One training run: build env and model from the config, train, evaluate (torch needed)."""
     from selfplaydrive.builder import build_env, build_model, instantiate
-    from selfplaydrive.trainers.run import train_run
+    from selfplaydrive.trainers.run import seed_everything, train_run
 
     run_dir = write_run_meta(cfg)
     env = build_env(cfg)
@@ -138,8 +217,9 @@ def train_task(cfg: Any) -> dict[str, Any]:
     logger = instantiate(cfg.logger, _partial_=True)  # the trainer fills run_dir, total_updates ...
     if hasattr(trainer, "run"):  # e.g. the stable-baselines3 path (trainer=sb3) builds its own policy
         return trainer.run(env, cfg, run_dir, logger=logger)
+    seed_everything(int(cfg.seed), trainer.torch_threads)  # before the model: its initial weights
     model = build_model(cfg, env)
-    return train_run(env, model, trainer, run_dir, logger=logger)
+    return train_run(env, model, trainer, run_dir, logger=logger, resume=cfg.get("resume"))
 
 
 def cmd_train(argv: Sequence[str]) -> int:
@@ -147,10 +227,16 @@ def cmd_train(argv: Sequence[str]) -> int:
     return run_hydra("train", train_task, argv)
 
 
+def eval_task(cfg: Any) -> Any:
+    """One evaluation run (selfplaydrive/eval/app.py), imported inside the run so that a
+    missing optional dependency is reported in one line like any other run error."""
+    from selfplaydrive.eval.app import eval_task as run_eval
+
+    return run_eval(cfg)
+
+
 def cmd_eval(argv: Sequence[str]) -> int:
     """``selfplaydrive eval [overrides] [-m]``."""
-    from selfplaydrive.eval.app import eval_task
-
     return run_hydra("eval", eval_task, argv)
 
 

@@ -123,7 +123,7 @@ def test_unknown_option_lists_choices():
         ("train", "model=nope", "valid options for 'model': deepsets, deepsets_laptop, transformer"),
         ("train", "trainer=nope", "valid options for 'trainer': ppo, ppo_laptop, sb3"),
         ("train", "experiment=nope", "valid options for 'experiment': ablate_collision, ablate_friction"),
-        ("eval", "eval=nope", "valid options for 'eval': paper, quick"),
+        ("eval", "eval=nope", "valid options for 'eval': diversity, paper, quick"),
         ("render", "drivr=random", "valid keys under '<root>': deterministic, driver, env"),
         ("render", "physics=nope", "valid options for 'physics': bicycle, friction, pymunk"),
         ("bench", "thread=[1]", "valid keys under '<root>':.*stages, steps, threads, warmup"),
@@ -227,14 +227,16 @@ def test_every_logger_option_instantiates(option, tmp_path):
 def test_every_eval_option_is_valid(option):
     """The eval group has no `_target_`: its keys are what `run_eval` reads."""
     from selfplaydrive.eval.app import ANALYSES
+    from selfplaydrive.eval.diversity import run_diversity
     from selfplaydrive.eval.longform import run_longform
     from selfplaydrive.eval.suites.report import PAPER_COUNTS
 
     cfg = compose("eval", [f"eval={option}"])
-    assert set(cfg.eval) == {"analyses", "batch_size", "suites", "longform"}
+    assert set(cfg.eval) == {"analyses", "batch_size", "suites", "longform", "diversity"}
     assert set(cfg.eval.analyses) <= set(ANALYSES)
     assert set(cfg.eval.suites) == set(PAPER_COUNTS) and all(v >= 1 for v in cfg.eval.suites.values())
     assert set(cfg.eval.longform) <= set(inspect.signature(run_longform).parameters)
+    assert set(cfg.eval.diversity) <= set(inspect.signature(run_diversity).parameters)
     assert cfg.eval.batch_size >= 1
 
 

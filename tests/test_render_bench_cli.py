@@ -5,6 +5,7 @@ and bad arguments fail with the valid choices."""
 from __future__ import annotations
 
 import json
+import warnings
 from importlib import resources
 
 from PIL import Image
@@ -70,3 +71,16 @@ def test_bench_sweep_over_config_groups(tmp_path, capsys):
     assert "unrecognized argument(s) --worlds" in capsys.readouterr().err
     assert main(["bench", "threads=[]", *QUICK_BENCH[:-1], f"hydra.run.dir={tmp_path}"]) == 2
     assert "threads" in capsys.readouterr().err
+
+
+def test_bench_counts_spawn_shortfalls_instead_of_warning(tmp_path, capsys):
+    # 60 m between agents cannot be met for 32 agents in a 200 m region: every world falls short
+    argv = ["bench", "json=true", "spawner.min_agent_distance=60", *QUICK_BENCH, f"hydra.run.dir={tmp_path}"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert not [w for w in caught if "PaperSpawner placed" in str(w.message)]
+    assert "PaperSpawner" not in captured.err
+    short = json.loads(captured.out.strip().splitlines()[-1])["spawn_shortfall"]
+    assert short["worlds"] >= 1 and short["missing_agents"] >= short["worlds"]

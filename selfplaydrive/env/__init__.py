@@ -7,7 +7,9 @@
 
 The adapters hold no simulation logic: they copy the native buffers into each library's
 conventions. Modules import their RL library lazily (attribute access), so importing
-`selfplaydrive.env` needs neither PettingZoo nor stable-baselines3.
+`selfplaydrive.env` needs neither PettingZoo nor stable-baselines3. `registration` holds the
+gymnasium ids (``selfplaydrive/SingleAgent-v0``, ``selfplaydrive/SelfPlay-v0``) that
+``import selfplaydrive`` registers.
 """
 
 from __future__ import annotations

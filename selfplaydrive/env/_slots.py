@@ -9,7 +9,9 @@ native buffers never leak into a learner.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 
@@ -38,12 +40,12 @@ class SlotStep:
     world_reset: np.ndarray
 
 
-def observe(env) -> np.ndarray:
+def observe(env: Any) -> np.ndarray:
     """Copy of the observations with rows of inactive slots zeroed."""
     return np.where(env.masks[:, None], env.observations, np.float32(0.0)).astype(np.float32)
 
 
-def collect(env) -> SlotStep:
+def collect(env: Any) -> SlotStep:
     """Read the results of the `env.step` just taken (copies, safe to keep)."""
     acted = env.reward_mask.copy()
     term = env.terminations & acted
@@ -75,3 +77,66 @@ def seed_stream(seed: int | None, rng: np.random.Generator | None) -> tuple[int,
     elif rng is None:
         rng = np.random.default_rng()
     return int(rng.integers(0, 2**62)), rng
+
+
+def check_open(closed: bool, where: str) -> None:
+    """Refuse to use an adapter after `close()`.
+
+    Raises:
+        RuntimeError: When `closed` is set, naming the call `where` that was refused.
+    """
+    if closed:
+        raise RuntimeError(f"{where}: the env is closed (close() was called); create a new one")
+
+
+def check_action(space: gym.Space, action: object, name: str) -> np.ndarray:
+    """One agent's action as a (2,) array ready for the native action buffer.
+
+    The adapters copy single actions into a table of the native dtype, and NumPy's cast would
+    silently truncate 6.9 to index 6 and turn NaN into index -2**63, so the action is checked
+    against the space first, as the native `VecEnv.step` checks whole batches.
+
+    Args:
+        space: The native action space (MultiDiscrete indices or a Box).
+        action: The agent's action (array-like of 2 values).
+        name: How the error names the action (e.g. ``"action"``, ``"actions['agent_3']"``).
+
+    Returns:
+        (2,) int64 indices (MultiDiscrete) or float32 values (Box).
+
+    Raises:
+        ValueError: Wrong shape or dtype, a non-finite value or a value outside the space.
+    """
+    a = np.asarray(action)
+    if a.shape != (2,):
+        raise ValueError(f"{name}: expected shape (2,), got shape {a.shape} ({action!r})")
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        return _check_indices(a, np.asarray(space.nvec), name)
+    if isinstance(space, gym.spaces.Box):
+        return _check_box(a, space, name)
+    raise TypeError(f"{name}: unsupported action space {space!r}; expected MultiDiscrete or Box")
+
+
+def _check_indices(a: np.ndarray, nvec: np.ndarray, name: str) -> np.ndarray:
+    expected = f"integer indices in [0, {nvec[0]}) x [0, {nvec[1]}) (MultiDiscrete {nvec.tolist()})"
+    if a.dtype.kind not in "iu":
+        # floats are refused, not rounded: 6.9 is no index, and NaN would cast to -2**63
+        raise ValueError(f"{name} = {a}: expected {expected} of an integer dtype, got dtype {a.dtype}")
+    bad = (a < 0) | (a >= nvec)
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise ValueError(f"{name}[{j}] = {a[j]}: expected an integer in [0, {nvec[j]}) ({expected})")
+    return a.astype(np.int64)
+
+
+def _check_box(a: np.ndarray, space: gym.spaces.Box, name: str) -> np.ndarray:
+    low, high = np.asarray(space.low), np.asarray(space.high)
+    if a.dtype.kind != "f":
+        raise ValueError(f"{name} = {a}: expected a float array (Box {low} .. {high}), got dtype {a.dtype}")
+    # the float32 bounds get the native check's relative slack, so a float64 copy of a bound passes
+    slack_lo, slack_hi = 1e-6 * np.abs(low), 1e-6 * np.abs(high)
+    bad = ~np.isfinite(a) | (a < low - slack_lo) | (a > high + slack_hi)
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise ValueError(f"{name}[{j}] = {a[j]}: expected a finite number in [{low[j]}, {high[j]}]")
+    return a.astype(np.float32)

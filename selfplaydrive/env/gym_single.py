@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 
 from selfplaydrive.drivers.static import static_actions
-from selfplaydrive.env._slots import observe, seed_stream
+from selfplaydrive.env._slots import check_action, check_open, observe, seed_stream
 
 OthersPolicy = Callable[[np.ndarray], np.ndarray]
 MAX_EMPTY_RESETS = 16
@@ -30,32 +30,38 @@ class SingleAgentEnv(gym.Env):
             (full braking, zero steering: they stop and stay), or a callable mapping the
             (A - 1, obs_dim) observations of the other slots (zeros for empty slots) to
             (A - 1, 2) actions in the env's action space.
+        render_mode: Must be None: the env draws nothing (accepted so `gymnasium.make` can
+            pass it).
 
     Raises:
-        ValueError: On a multi-world env or an unknown `others`.
+        ValueError: On a multi-world env, an unknown `others` or a render mode.
     """
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, env, others: str | OthersPolicy = "rule_based") -> None:
+    def __init__(self, env: Any, others: str | OthersPolicy = "rule_based", render_mode: None = None) -> None:
         if env.num_worlds != 1:
             raise ValueError(
                 f"SingleAgentEnv: expected a VecEnv with num_worlds=1, got num_worlds={env.num_worlds}"
             )
         if not (callable(others) or others in ("rule_based", "static")):
             raise ValueError(f"others: expected 'rule_based', 'static' or a callable, got {others!r}")
+        if render_mode is not None:
+            raise ValueError(f"render_mode: SingleAgentEnv draws nothing, expected None, got {render_mode!r}")
+        self.render_mode = None
         self.env = env
         self.others = others
         self.observation_space = env.observation_space
         self.action_space = env.action_space
         self.ego = 0
-        self._driver = None
+        self._driver: Any = None
         if others == "rule_based":
             from selfplaydrive.drivers.rule_based import RuleBasedDriver
 
             self._driver = RuleBasedDriver(env)
         self._seeds: np.random.Generator | None = None
         self._done = True
+        self._closed = False
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -83,11 +89,17 @@ class SingleAgentEnv(gym.Env):
         Returns:
             observation (obs_dim,) float32, reward, terminated, truncated, info with
             `reward_terms` (8,) float32 (columns `VecEnv.term_names`) and `events` (bit mask).
+
+        Raises:
+            ValueError: An action outside the action space (a float or NaN index included).
+            RuntimeError: After `close()`, or when the episode has ended (call `reset()`).
         """
+        check_open(self._closed, "SingleAgentEnv.step")
+        ego_action = check_action(self.action_space, action, "action")
         if self._done:
             raise RuntimeError("SingleAgentEnv.step: the episode has ended; call reset() first")
         acts = self._other_actions()
-        acts[self.ego] = np.asarray(action).reshape(2)
+        acts[self.ego] = ego_action
         env, e = self.env, self.ego
         env.step(acts)
         term, trunc = bool(env.terminations[e]), bool(env.truncations[e])
@@ -95,6 +107,10 @@ class SingleAgentEnv(gym.Env):
         obs = (env.final_observations[e] if self._done else env.observations[e]).astype(np.float32)
         info = {"reward_terms": env.reward_terms[e].copy(), "events": int(env.state.events[e])}
         return obs, float(env.rewards[e]), term, trunc, info
+
+    def close(self) -> None:
+        """Mark the env closed: later `step` calls raise (the native env holds only buffers)."""
+        self._closed = True
 
     def _other_actions(self) -> np.ndarray:
         env = self.env

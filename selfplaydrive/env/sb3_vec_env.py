@@ -18,9 +18,12 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv as SB3BaseVecEnv
 
-from selfplaydrive.env._slots import collect, observe, seed_stream
+from selfplaydrive._optional import requires_extra
+from selfplaydrive.env._slots import check_open, collect, observe, seed_stream
+
+with requires_extra("sb3"):
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnv as SB3BaseVecEnv
 
 
 class SB3VecEnv(SB3BaseVecEnv):
@@ -34,8 +37,9 @@ class SB3VecEnv(SB3BaseVecEnv):
 
     render_mode = None
 
-    def __init__(self, env, seed: int | None = 0) -> None:
+    def __init__(self, env: Any, seed: int | None = 0) -> None:
         self.env = env
+        self.closed = False
         self._rng: np.random.Generator | None = None
         self._first_seed = seed
         self._actions: np.ndarray | None = None
@@ -52,10 +56,21 @@ class SB3VecEnv(SB3BaseVecEnv):
         return observe(self.env)
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions).reshape(self.num_envs, 2)
+        """Keep (N, 2) actions for `step_wait` (checked there by the native env).
+
+        Raises:
+            RuntimeError: After `close()`.
+            ValueError: Actions that do not hold N rows of 2 values.
+        """
+        check_open(self.closed, "SB3VecEnv.step_async")
+        a = np.asarray(actions)
+        if a.size != self.num_envs * 2:
+            raise ValueError(f"actions: expected shape ({self.num_envs}, 2), got shape {a.shape}")
+        self._actions = a.reshape(self.num_envs, 2)
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         """Step every world (see the module docstring for the per-slot values)."""
+        check_open(self.closed, "SB3VecEnv.step_wait")
         if self._actions is None:
             raise RuntimeError("SB3VecEnv.step_wait: call step_async(actions) first")
         self.env.step(self._actions)
@@ -79,7 +94,9 @@ class SB3VecEnv(SB3BaseVecEnv):
         return self._seeds
 
     def close(self) -> None:
-        """Nothing to release (the native env holds only NumPy buffers)."""
+        """Mark the env closed (the native env holds only NumPy buffers): later steps raise."""
+        self.closed = True
+        self._actions = None
 
     def get_attr(self, attr_name: str, indices=None) -> list[Any]:
         return [getattr(self, attr_name)] * len(list(self._get_indices(indices)))

@@ -16,9 +16,12 @@
   (C_collision, C_collision) over unordered pairs of acting agents of the same world, so event
   counts can be normalised by how common each coefficient was on the road.
 
-`analyse(log)` bins everything; `save_diversity(log, out_dir)` writes the PNGs (matplotlib, Agg),
-CSV event tables and a JSON of the binned data. Normalised = (share of events in a bin) /
-(share of exposure in the bin): 1 means "as often as the coefficient occurs".
+`run_diversity(maps_or_env_factory, policy, ...)` drives a policy with the training
+distribution of the coefficients and records every step (what `selfplaydrive eval
+eval=diversity` runs); `analyse(log)` bins everything; `save_diversity(log, out_dir)` writes
+the PNGs (matplotlib, Agg), CSV event tables and a JSON of the binned data. Normalised =
+(share of events in a bin) / (share of exposure in the bin): 1 means "as often as the
+coefficient occurs".
 
 Limitation: an autoreset clears the event bits of a world's last step before Python sees them,
 so events in the very last step of an episode are not logged (1 step in 200-400).
@@ -28,6 +31,8 @@ from __future__ import annotations
 
 import csv
 import json
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,7 +43,14 @@ from selfplaydrive.eval.report import json_safe
 from selfplaydrive.eval.waymax_metrics import boxes_overlap
 from selfplaydrive.scenario.types import COEFF_NAMES
 
-__all__ = ["DiversityLog", "DiversityRecorder", "analyse", "save_diversity"]
+__all__ = [
+    "DiversityLog",
+    "DiversityRecorder",
+    "analyse",
+    "diversity_summary",
+    "run_diversity",
+    "save_diversity",
+]
 
 C_COLL, C_OFF, C_BIAS = (COEFF_NAMES.index(n) for n in ("collision", "offroad", "center_bias"))
 EV_COLLIDE, EV_OFFROAD = 1, 4
@@ -193,6 +205,10 @@ class DiversityRecorder:
             )
         else:
             self._coll.append((float(st.coeffs[i, C_COLL]), float("nan"), "static", bool(hit[k])))
+
+    def counts(self) -> tuple[int, int]:
+        """(road-edge onsets, vehicle collisions) logged so far."""
+        return sum(len(a) for a in self._off), len(self._coll)
 
     def log(self) -> DiversityLog:
         """The events and exposure recorded so far."""
@@ -364,3 +380,95 @@ def _save(fig: Any, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def run_diversity(
+    env_factory_or_maps: Any,
+    policy: Callable[[np.ndarray, Any], np.ndarray],
+    spawner: Any = None,
+    duration_s: float = 200.0,
+    num_worlds: int = 16,
+    seed: int = 0,
+    lateral_every: int = 10,
+    exposure_every: int = 10,
+    progress: Callable[[str], None] | None = None,
+) -> DiversityLog:
+    """Drive `policy` in every agent slot and record the diversity events of each step.
+
+    Episodes end and autoreset as in training, so the coefficients keep being redrawn from the
+    spawner's conditioning sampler: it must be the training distribution (mode "train"), else
+    every agent has the same coefficients and there is nothing to bin.
+
+    Args:
+        env_factory_or_maps: Maps for `make_env` (a `RoadMap`, a spec or a list), or a factory
+            `f(spawner=, num_worlds=, seed=) -> VecEnv` that uses the spawner it is given.
+        policy: `policy(obs, env) -> (N, 2) actions`.
+        spawner: The env's spawner (default `PaperSpawner()`: the paper's training coefficients).
+        duration_s: Simulated time per world [s].
+        num_worlds: Worlds stepped together.
+        seed: Reset seed.
+        lateral_every: Steps between lateral-offset samples (`DiversityRecorder`).
+        exposure_every: Steps between exposure samples.
+        progress: Called with a one-line status after every tenth of the run; None is silent.
+
+    Returns:
+        The recorded `DiversityLog`.
+
+    Raises:
+        ValueError: A non-positive duration or world count, or a spawner whose coefficients
+            are the fixed evaluation ones.
+    """
+    from selfplaydrive.eval.longform import build_eval_env
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    if not (np.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"diversity duration_s: expected a positive number of seconds, got {duration_s!r}")
+    if int(num_worlds) < 1:
+        raise ValueError(f"diversity num_worlds: expected an integer >= 1, got {num_worlds!r}")
+    spawner = PaperSpawner() if spawner is None else spawner
+    mode = getattr(getattr(spawner, "conditioning", None), "mode", "train")
+    if mode == "eval":
+        raise ValueError(
+            "diversity spawner: its conditioning sampler has mode 'eval' (one fixed coefficient vector); "
+            "expected the training distribution (mode 'train')"
+        )
+    env = build_eval_env(env_factory_or_maps, spawner, int(num_worlds), int(seed))
+    steps = max(1, round(duration_s / float(env.params.dt)))
+    obs = env.reset(seed=seed)
+    rec = DiversityRecorder(env, lateral_every=lateral_every, exposure_every=exposure_every)
+    every, start = max(1, steps // 10), time.perf_counter()
+    for k in range(1, steps + 1):
+        env.step(policy(obs, env))
+        obs = env.observations
+        rec.record()
+        env.pop_episode_stats()  # not used here; dropped so the list does not grow
+        if progress is not None and (k % every == 0 or k == steps):
+            dt, (n_off, n_coll) = float(env.params.dt), rec.counts()
+            progress(
+                f"diversity: {k * dt:.1f}/{steps * dt:.1f} s simulated, {n_off} road-edge events, "
+                f"{n_coll} collisions ({time.perf_counter() - start:.0f} s)"
+            )
+    return rec.log()
+
+
+def diversity_summary(log: DiversityLog) -> dict[str, Any]:
+    """The scalar results of `analyse(log)` (event counts, shares below the first bin edge) for
+    a markdown table; the binned curves stay in the JSON and PNGs of `save_diversity`."""
+    data = analyse(log)
+    col = data["collision"]
+    keep = (
+        "agent_pairs",
+        "with_static",
+        "without_overlap",
+        "share_both_below_first_edge",
+        "share_one_below_first_edge",
+        "pair_share_both_below_first_edge",
+        "first_edge",
+    )
+    return {
+        "offroad_events": len(log.offroad_c),
+        "collision": {k: col[k] for k in keep},
+        "lateral_samples": len(log.lat_offset),
+        "offroad_exposure": float(np.sum(log.offroad_exposure)),
+        "pair_exposure": float(np.sum(log.pair_exposure)),
+    }

@@ -31,6 +31,7 @@ Example:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,7 +42,14 @@ from selfplaydrive.eval.stats import km_between_incidents, rate_per_km
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.scenario.types import COEFF_NAMES
 
-__all__ = ["INCIDENT_TYPES", "LongformResult", "RuleBasedPolicy", "WaypointRefresher", "run_longform"]
+__all__ = [
+    "INCIDENT_TYPES",
+    "LongformResult",
+    "RuleBasedPolicy",
+    "WaypointRefresher",
+    "build_eval_env",
+    "run_longform",
+]
 
 # Event bits (selfplaydrive/_sim/common.pxd EV_*) and the matching `ev_count` columns
 # (sim.vec_env.EVENT_NAMES order).
@@ -279,6 +287,27 @@ class _OnsetCounter:
             self.prev[t][w * A : (w + 1) * A] = False
 
 
+class _Progress:
+    """One status line per tenth of a run (long runs are otherwise silent for minutes)."""
+
+    def __init__(self, say: Callable[[str], None] | None, steps: int, dt: float) -> None:
+        self.say, self.steps, self.dt = say, steps, dt
+        self.every = max(1, steps // 10)
+        self.start = time.perf_counter()
+
+    def due(self, done: int) -> bool:
+        """Whether a line is due after `done` steps."""
+        return self.say is not None and (done % self.every == 0 or done == self.steps)
+
+    def say_status(self, done: int, km: float, onsets: dict[str, int]) -> None:
+        """Report `done` steps, `km` driven so far and the onsets by type."""
+        incidents = sum(onsets[t] for t in INCIDENT_TYPES)
+        self.say(
+            f"longform: {done * self.dt:.1f}/{self.steps * self.dt:.1f} s simulated, {km:.2f} km, "
+            f"{incidents} incidents ({time.perf_counter() - self.start:.0f} s)"
+        )
+
+
 def _eval_spawner(duration_s: float, spawner_kwargs: dict[str, Any]) -> Any:
     from selfplaydrive.scenario.conditioning import ConditioningSampler
     from selfplaydrive.scenario.spawner import PaperSpawner
@@ -289,7 +318,15 @@ def _eval_spawner(duration_s: float, spawner_kwargs: dict[str, Any]) -> Any:
     return PaperSpawner(episode_lengths=(duration_s + 1.0,), **kw)
 
 
-def _build_env(source: Any, spawner: Any, num_worlds: int, seed: int, env_kwargs: dict[str, Any]) -> Any:
+def build_eval_env(
+    source: Any, spawner: Any, num_worlds: int, seed: int, env_kwargs: dict[str, Any] | None = None
+) -> Any:
+    """A `VecEnv` with `spawner` from maps or an env factory (see `run_longform`).
+
+    Raises:
+        ValueError: `source` is neither maps nor a callable.
+    """
+    env_kwargs = dict(env_kwargs or {})
     if isinstance(source, (RoadMap, str)) or (isinstance(source, Sequence) and not callable(source)):
         from selfplaydrive.builder import make_env
 
@@ -311,6 +348,7 @@ def run_longform(
     spawner_kwargs: dict[str, Any] | None = None,
     env_kwargs: dict[str, Any] | None = None,
     refresh_waypoints: bool = True,
+    progress: Callable[[str], None] | None = None,
 ) -> LongformResult:
     """Run the long-form protocol (module docstring) and count incidents and distance.
 
@@ -325,6 +363,8 @@ def run_longform(
         spawner_kwargs: Extra `PaperSpawner` arguments (e.g. num_agents).
         env_kwargs: Extra `VecEnv` arguments (num_threads, terminated_vehicle ...).
         refresh_waypoints: Give agents new waypoints when their route ends.
+        progress: Called with a one-line status (simulated time, km, incidents, wall time)
+            after every tenth of the run; None is silent.
 
     Returns:
         The `LongformResult`.
@@ -337,14 +377,15 @@ def run_longform(
     if int(num_worlds) < 1:
         raise ValueError(f"num_worlds: expected an integer >= 1, got {num_worlds!r}")
     spawner = _eval_spawner(float(duration_s), dict(spawner_kwargs or {}))
-    env = _build_env(env_factory_or_maps, spawner, int(num_worlds), int(seed), dict(env_kwargs or {}))
+    env = build_eval_env(env_factory_or_maps, spawner, int(num_worlds), int(seed), env_kwargs)
     dt = float(env.params.dt)
     steps = round(duration_s / dt)
     obs = env.reset(seed=seed)
     counter = _OnsetCounter(env)
     refresher = WaypointRefresher(env, np.random.default_rng([seed, 1])) if refresh_waypoints else None
     km_done, episodes = 0.0, 0
-    for _ in range(steps):
+    report = _Progress(progress, steps, dt)
+    for k in range(steps):
         env.step(policy(obs, env))
         obs = env.observations
         counter.after_step()
@@ -354,6 +395,8 @@ def run_longform(
             episodes += 1
         if refresher is not None:
             refresher.refresh()
+        if report.due(k + 1):
+            report.say_status(k + 1, km_done + float(np.sum(env.state.dist)) / 1000.0, counter.onsets)
     km = km_done + float(np.sum(env.state.dist)) / 1000.0
     coeffs = spawner.conditioning.eval_vector() if spawner.conditioning.mode == "eval" else None
     return LongformResult(

@@ -19,11 +19,13 @@ from dataclasses import fields
 from itertools import pairwise
 from typing import Protocol, runtime_checkable
 
-import torch
-from torch import Tensor, nn
-
+from selfplaydrive._optional import requires_extra
 from selfplaydrive.maps.roadmap import SegmentType
 from selfplaydrive.sim.layout import EGO_FEATURES, ObsLayout
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor, nn
 
 State = tuple[Tensor, ...]
 

@@ -13,9 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 from itertools import pairwise
 
-import torch
-from torch import Tensor, nn
-
+from selfplaydrive._optional import requires_extra
 from selfplaydrive.models.common import (
     ObsSplitter,
     State,
@@ -27,6 +25,10 @@ from selfplaydrive.models.common import (
     reset_state,
 )
 from selfplaydrive.sim.layout import ObsLayout
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor, nn
 
 
 def _encoder(in_dim: int, width: int) -> nn.Sequential:

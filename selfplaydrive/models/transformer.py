@@ -13,10 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-import torch
-from torch import Tensor, nn
-from torch.nn import functional
-
+from selfplaydrive._optional import requires_extra
 from selfplaydrive.models.common import (
     ObsSplitter,
     State,
@@ -27,6 +24,11 @@ from selfplaydrive.models.common import (
     mlp,
 )
 from selfplaydrive.sim.layout import ObsLayout
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor, nn
+    from torch.nn import functional
 
 
 class Attention(nn.Module):

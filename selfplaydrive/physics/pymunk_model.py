@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.physics.models import BicycleModel
 
@@ -65,7 +66,8 @@ class PymunkModel(BicycleModel):
         super().__init__(wheelbase_ratio, max_speed)
         if not (0 < gravity < 100):
             raise ConfigError(f"physics.gravity: expected a value in (0, 100) m/s^2, got {gravity!r}")
-        import pymunk
+        with requires_extra("pymunk"):
+            import pymunk
 
         self._pymunk = pymunk
         self.gravity = float(gravity)

@@ -15,6 +15,9 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from selfplaydrive._optional import requires_extra
+from selfplaydrive.errors import MissingExtraError
+
 __all__ = ["FORMATS", "has_mp4", "png_paths", "write_video"]
 
 FORMATS = (".png", ".gif", ".mp4")
@@ -23,9 +26,10 @@ FORMATS = (".png", ".gif", ".mp4")
 def has_mp4() -> bool:
     """Whether MP4 writing is available (imageio and imageio-ffmpeg importable)."""
     try:
-        import imageio  # noqa: F401
-        import imageio_ffmpeg  # noqa: F401
-    except ImportError:
+        with requires_extra("video"):
+            import imageio  # noqa: F401
+            import imageio_ffmpeg  # noqa: F401
+    except MissingExtraError:  # a probe: absence is an answer here, not an error
         return False
     return True
 
@@ -131,7 +135,8 @@ def _write_gif(frames: Iterable[np.ndarray], path: Path, fps: float) -> Path:
 
 
 def _write_mp4(frames: Iterable[np.ndarray], path: Path, fps: float) -> Path:
-    import imageio.v2 as imageio
+    with requires_extra("video"):
+        import imageio.v2 as imageio
 
     with imageio.get_writer(path, fps=fps, codec="libx264", quality=7, pixelformat="yuv420p") as writer:
         for f in frames:

@@ -26,6 +26,7 @@ import os
 import warnings
 from collections.abc import Mapping, Sequence
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -91,7 +92,7 @@ class VecEnv:
         actions: DiscreteActions | ContinuousActions | None = None,
         params: SimParams | None = None,
         obs: ObsConfig | None = None,
-        seed: int = 0,
+        seed: int | None = 0,
         num_threads: int = 1,
         terminated_vehicle: str = "remove",
         reward: LinearReward | Mapping[str, float] | None = None,
@@ -106,16 +107,17 @@ class VecEnv:
             raise ValueError(
                 f"spawner: expected an object with a sample(road_map, rng, map_index) method, got {spawner!r}"
             )
-        num_worlds = _integer("num_worlds", num_worlds, 1)
-        num_threads = _integer("num_threads", num_threads, 1, MAX_THREADS)
-        seed = _seed(seed)
+        num_worlds = check_integer("num_worlds", num_worlds, 1)
+        num_threads = check_integer("num_threads", num_threads, 1, MAX_THREADS)
+        seed = check_seed(seed)
         if terminated_vehicle not in ("remove", "obstacle"):
             raise ValueError(
                 f"terminated_vehicle: expected 'remove' or 'obstacle', got {terminated_vehicle!r}"
             )
         self.spawner = spawner
         self.num_worlds = int(num_worlds)
-        self.physics = physics if physics is not None else FrictionBicycleModel()
+        # a kernel model or one stepped in Python (`external`, physics/pymunk_model.py)
+        self.physics: Any = physics if physics is not None else FrictionBicycleModel()
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
@@ -221,7 +223,7 @@ class VecEnv:
             ConfigError: `seed` is not a non-negative integer.
         """
         if seed is not None:
-            seed = _seed(seed)
+            seed = check_seed(seed)
         if seed is not None or self._pending_first is None:
             self._setup_rngs(self._seed if seed is None else seed)
             if seed is not None:
@@ -347,6 +349,7 @@ class VecEnv:
             a = slice(w * A, (w + 1) * A)
             ever = b["ever"][a]
             spawned = int(np.count_nonzero(b["agent_valid"][a]))
+            terms = {n: float(v) for n, v in zip(self.term_names, b["term_sum"][w], strict=True)}
             rec: dict[str, object] = {
                 "world": int(w),
                 "map": int(b["map_id"][w]),
@@ -354,7 +357,7 @@ class VecEnv:
                 "num_agents": spawned,
                 "spawn_shortfall": A - spawned,
                 "km": float(b["dist"][w] / 1000.0),
-                "terms": {n: float(v) for n, v in zip(self.term_names, b["term_sum"][w], strict=True)},
+                "terms": terms,
                 "events": {n: int(v) for n, v in zip(EVENT_NAMES, b["ev_count"][w], strict=True)},
                 "agents_with": {n: int(np.count_nonzero(ever & bit)) for n, bit in EVER_BITS.items()},
             }
@@ -425,26 +428,33 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     return v
 
 
-def _integer(name: str, value: object, low: int, high: int | None = None) -> int:
+def check_integer(name: str, value: object, low: int, high: int | None = None) -> int:
     """`value` as an int in [low, high]; a fractional or non-numeric value is refused (int()
-    would truncate 2.5 to 2 and turn "abc" into a bare ValueError)."""
+    would truncate 2.5 to 2 and turn "abc" into a bare ValueError).
+
+    Raises:
+        ConfigError: Naming `name` (the argument or config key), the value and the range.
+    """
     if isinstance(value, (float, np.floating)) and float(value).is_integer():
         value = int(value)  # 4.0 from a YAML file is 4
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-    if ok and low <= int(value) and (high is None or int(value) <= high):
-        return int(value)
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        if low <= int(value) and (high is None or int(value) <= high):
+            return int(value)
     bound = f"in [{low}, {high}]" if high is not None else f">= {low}"
     raise ConfigError(f"{name}: expected an integer {bound}, got {value!r}")
 
 
-def _seed(seed: object) -> int | None:
-    """A seed for numpy's generators: a non-negative integer, or None (fresh entropy)."""
+def check_seed(seed: object, name: str = "seed") -> int | None:
+    """A seed for numpy's generators: a non-negative integer, or None (fresh entropy).
+
+    Raises:
+        ConfigError: Naming `name` and the value.
+    """
     if seed is None:
         return None
-    ok = isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0
-    if not ok:
-        raise ConfigError(f"seed: expected a non-negative integer, got {seed!r}")
-    return int(seed)
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and int(seed) >= 0:
+        return int(seed)
+    raise ConfigError(f"{name}: expected a non-negative integer, got {seed!r}")
 
 
 def _world_seeds(seed: int | None, num_worlds: int) -> np.ndarray:

@@ -14,18 +14,24 @@ from __future__ import annotations
 import json
 import math
 import platform
+import random
 import subprocess
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import torch
-from torch import nn
+import numpy as np
 
+from selfplaydrive._optional import requires_extra
+from selfplaydrive.errors import CheckpointError
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.config import PPOConfig
 from selfplaydrive.trainers.ppo.logging import Logger, TensorBoardLogger
 from selfplaydrive.trainers.ppo.trainer import PPOTrainer
+
+with requires_extra("torch"):
+    import torch
+    from torch import nn
 
 EVAL_SEED_OFFSET = 1_000_003  # evaluation episodes never reuse the training seed's worlds
 SUMMARY_KEYS = (
@@ -45,18 +51,22 @@ def train_run(
     model: nn.Module,
     config: PPOConfig | dict,
     run_dir: str | Path,
-    resume: bool | str | Path = False,
+    resume: bool | str | Path | None = False,
     logger: Callable[..., Logger] | Mapping[str, Any] | None = None,
 ) -> dict[str, object]:
     """Train `model` on `env` with PPO, writing the run folder; returns the evaluation summary.
 
     Args:
         env: A `VecEnv` (under torchrun: one per rank; the trainer seeds it `seed + rank`).
-        model: A policy model (`selfplaydrive.models`).
+        model: A policy model (`selfplaydrive.models`). Its initial weights come from torch's
+            global generator when it was built: call `seed_everything(seed)` before building it
+            (`selfplaydrive train` does) for a run that repeats exactly.
         config: A `PPOConfig` or a mapping of its fields.
         run_dir: Run folder (created).
-        resume: True continues from the newest checkpoint in `run_dir/checkpoints` (an error
-            when there is none); a path continues from that checkpoint.
+        resume: Continue an earlier run (see `resolve_resume`): True or a run folder takes its
+            newest checkpoint, a `.pt` path that checkpoint. Training then continues in the
+            checkpoint's run folder, whose logger output after the checkpoint is dropped first.
+            False or None: a new run in `run_dir`.
         logger: Where scalars go: a factory called with the keyword arguments
             `run_dir, total_updates, progress_bar, enabled, initial` (e.g. `JsonlLogger`, or
             what `instantiate(cfg.logger)` returns for a `logger/` config), or a config node
@@ -64,19 +74,28 @@ def train_run(
             `run_dir/tb` (the `logger=tensorboard` default).
 
     Returns:
-        {"updates", "agent_steps", "eval": summary dict (see `write_summary`)}.
+        {"updates", "agent_steps", "run_dir", "eval": summary dict (see `write_summary`)}.
+
+    Raises:
+        CheckpointError: `resume` names no checkpoint, or an unreadable or foreign one.
     """
     cfg = config if isinstance(config, PPOConfig) else PPOConfig.from_dict(dict(config))
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    seed_everything(cfg.seed, cfg.torch_threads)
+    invoked_in = Path(run_dir)
+    checkpoint, run_dir = None, invoked_in
     trainer = PPOTrainer(env, model, cfg, run_dir)
-    main = trainer.dist.is_main
     if resume:
-        path = _resume_path(run_dir, resume, trainer.dist.rank)
-        trainer.load(path)
-    elif main:
+        checkpoint, run_dir = resolve_resume(resume, invoked_in, trainer.dist.rank)
+        trainer.run_dir = run_dir
+        ckpt.remove_stale_tmp(checkpoint.parent, trainer.dist.rank)
+        trainer.load(checkpoint)
+    main = trainer.dist.is_main
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if main and checkpoint is None:
         _write_json(run_dir / "config.json", cfg.to_dict())
         _write_json(run_dir / "run_info.json", run_info(env, model, trainer))
+    elif main:
+        _record_resume(run_dir, invoked_in, checkpoint, trainer, cfg)
     logger = make_logger(logger)(
         run_dir=run_dir,
         total_updates=trainer.total_updates,
@@ -85,18 +104,126 @@ def train_run(
         initial=trainer.update_idx,
     )
     try:
+        if checkpoint is not None:
+            if hasattr(logger, "truncate"):  # what a stopped attempt logged after the checkpoint
+                logger.truncate(trainer.global_step * trainer.dist.world_size)
+            logger.text(f"resuming from {checkpoint} at update {trainer.update_idx} in {run_dir}")
         trainer.train(logger=logger)
-        final = run_dir / "checkpoints" / ("final.pt" if main else f"final.rank{trainer.dist.rank}.pt")
-        trainer.save(final)
-        summary = {}
+        trainer.save(run_dir / "checkpoints" / ckpt.final_name(trainer.dist.rank))
+        summary: dict[str, object] = {}
         if cfg.eval_episodes:
             seed = cfg.seed + EVAL_SEED_OFFSET + trainer.dist.rank
             summary = trainer.evaluate(cfg.eval_episodes, cfg.eval_max_steps, cfg.eval_deterministic, seed)
+            summary.update(eval_protocol(env, cfg.eval_deterministic))
             if main:
                 write_summary(run_dir, summary, logger)
     finally:
         logger.close()
-    return {"updates": trainer.update_idx, "agent_steps": trainer.agent_steps, "eval": summary}
+    return {
+        "updates": trainer.update_idx,
+        "agent_steps": trainer.agent_steps,
+        "run_dir": str(run_dir),
+        "eval": summary,
+    }
+
+
+def seed_everything(seed: int, torch_threads: int = 0) -> None:
+    """Seed torch (CPU and CUDA), NumPy's and Python's global generators with `seed`: call it
+    before building the model, whose initial weights come from torch's global generator.
+
+    Args:
+        seed: The run's seed.
+        torch_threads: When > 0, torch's CPU thread count is set first (`PPOConfig.torch_threads`):
+            the orthogonal initialisation (a QR decomposition) gives other bits on another thread
+            count, so the same seed would otherwise give another model after an earlier run in the
+            same process (a Hydra sweep) changed the count.
+    """
+    if torch_threads:
+        torch.set_num_threads(int(torch_threads))
+    torch.manual_seed(int(seed))  # also seeds every CUDA device
+    np.random.seed(int(seed) % 2**32)
+    random.seed(int(seed))
+
+
+def resolve_resume(resume: bool | str | Path, run_dir: str | Path, rank: int = 0) -> tuple[Path, Path]:
+    """The checkpoint and the run folder a `resume` argument of `train_run` names.
+
+    Args:
+        resume: True: the newest checkpoint of `run_dir`. A folder: a run folder (or its
+            `checkpoints/` folder), its newest checkpoint (`checkpoint.newest`: the furthest of
+            the periodic ones and `final.pt`). A file: that checkpoint; rank r > 0 of a torchrun
+            job reads its own sibling file (`ckpt_X.rank<r>.pt`, `final.rank<r>.pt`).
+        run_dir: The folder of this invocation (used with True, or for a loose checkpoint file).
+        rank: This process's rank.
+
+    Returns:
+        (checkpoint file, run folder that training continues in: the folder holding the
+        checkpoint's `checkpoints/`, else `run_dir`).
+
+    Raises:
+        CheckpointError: No such file or folder, or a folder without checkpoints.
+    """
+    path = Path(run_dir) if resume is True else Path(resume).expanduser()
+    if path.is_dir():
+        # a run folder, or its checkpoints/ folder itself
+        folder = (
+            path
+            if path.name == "checkpoints" and not (path / "checkpoints").is_dir()
+            else path / "checkpoints"
+        )
+        found = ckpt.newest(folder, rank) if folder.is_dir() else None
+        if found is None:
+            raise CheckpointError(
+                f"resume: no checkpoint (ckpt_*.pt or final.pt) in {folder}: expected the folder of a "
+                "run of selfplaydrive train, or a checkpoint file",
+                path,
+            )
+        return found, folder.parent
+    if not path.is_file():
+        raise CheckpointError(
+            "resume: no such file or folder: expected a run folder or a checkpoint .pt", path
+        )
+    if rank:
+        path = path.with_name(ckpt.rank_name(path.name, rank))
+    owner = path.parent.parent if path.parent.name == "checkpoints" else Path(run_dir)
+    return path, owner
+
+
+def eval_protocol(env, deterministic: bool) -> dict[str, str]:
+    """How the final evaluation chose its reward coefficients and actions (recorded in eval.json).
+
+    `PPOTrainer.evaluate` runs on the training env, so the coefficients are those of the env's
+    spawner: "fixed_eval_coefficients" when its conditioning sampler is in eval mode (paper
+    section 5: every penalty at its maximum, B = 0, D = 3 m; `reward=eval`), otherwise
+    "training_distribution" (random draws per agent, as in training). Not the protocol of
+    `selfplaydrive eval`, which builds its own scenarios.
+    """
+    conditioning = getattr(getattr(env, "spawner", None), "conditioning", None)
+    fixed = getattr(conditioning, "mode", None) == "eval"
+    return {
+        "protocol": "fixed_eval_coefficients" if fixed else "training_distribution",
+        "actions": "greedy" if deterministic else "sampled",
+    }
+
+
+def _record_resume(
+    run_dir: Path, invoked_in: Path, checkpoint: Path, trainer: PPOTrainer, cfg: PPOConfig
+) -> None:
+    """Note a resume in the run folder (`resumes.jsonl`) and, when this invocation has a folder
+    of its own (a new Hydra run folder), there too (`resume.json`)."""
+    record = {
+        "checkpoint": str(checkpoint),
+        "update": trainer.update_idx,
+        "run_folder": str(run_dir),
+        "invoked_in": str(invoked_in),
+        "git_commit": _git_commit(),
+        "config": cfg.to_dict(),
+    }
+    with (run_dir / "resumes.jsonl").open("a", encoding="utf-8") as f:
+        f.write(json.dumps(record, sort_keys=True, default=str) + "\n")
+    if invoked_in.resolve() != run_dir.resolve():
+        invoked_in.mkdir(parents=True, exist_ok=True)
+        _write_json(invoked_in / "resume.json", record)
 
 
 def make_logger(spec: Callable[..., Logger] | Mapping[str, Any] | None) -> Callable[..., Logger]:
@@ -114,22 +241,15 @@ def make_logger(spec: Callable[..., Logger] | Mapping[str, Any] | None) -> Calla
     return spec
 
 
-def _resume_path(run_dir: Path, resume: bool | str | Path, rank: int) -> Path:
-    if resume is True:
-        path = ckpt.latest(run_dir / "checkpoints", rank)
-        if path is None:
-            raise FileNotFoundError(f"resume=True: no checkpoint ckpt_*.pt in {run_dir / 'checkpoints'}")
-        return path
-    return Path(resume)
-
-
-def write_summary(run_dir: Path, summary: dict[str, float], logger: Logger | None = None) -> None:
-    """Print the short evaluation summary and save every metric to `run_dir/eval.json`."""
+def write_summary(run_dir: Path, summary: dict[str, object], logger: Logger | None = None) -> None:
+    """Print the short evaluation summary (with its protocol, see `eval_protocol`) and save
+    every metric to `run_dir/eval.json`."""
     _write_json(run_dir / "eval.json", summary)
     shown = ", ".join(
         f"{k} {summary[k]:.3g}" for k in SUMMARY_KEYS if k in summary and math.isfinite(summary[k])
     )
-    line = f"evaluation: {shown} (full summary in {run_dir / 'eval.json'})"
+    how = " ".join(f"{k} {summary[k]}" for k in ("protocol", "actions") if k in summary)
+    line = f"evaluation: {shown} ({how or 'protocol not recorded'}; full summary in {run_dir / 'eval.json'})"
     (logger.text if logger is not None else print)(line)
 
 

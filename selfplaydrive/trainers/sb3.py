@@ -28,17 +28,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 from gymnasium import spaces
-from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import KVWriter
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-from torch import Tensor, nn
 
+from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.models.common import ObsSplitter, compact_sets, masked_max, mlp
 from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor, nn
+
+with requires_extra("sb3"):
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import KVWriter
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 EVAL_SEED_OFFSET = 1_000_003  # evaluation worlds never repeat the training seed's worlds
 SUMMARY_KEYS = ("episodes", "waypoint_completion", "collision_rate", "offroad_rate", "red_light_rate")
@@ -238,7 +243,8 @@ class SB3Trainer:
 
     def build(self, venv) -> Any:
         """SB3 PPO over `venv` (an `SB3VecEnv`) with the Deep Sets extractor."""
-        from stable_baselines3 import PPO
+        with requires_extra("sb3"):
+            from stable_baselines3 import PPO
 
         native = venv.env
         policy_kwargs = {
@@ -284,11 +290,12 @@ class SB3Trainer:
         Returns:
             {"agent_steps", "model_path", "eval": summary dict (empty when eval_episodes = 0)}.
         """
-        from stable_baselines3.common.logger import HumanOutputFormat
-        from stable_baselines3.common.logger import Logger as SB3Logger
+        with requires_extra("sb3"):
+            from stable_baselines3.common.logger import HumanOutputFormat
+            from stable_baselines3.common.logger import Logger as SB3Logger
 
         from selfplaydrive.env import SB3VecEnv
-        from selfplaydrive.trainers.run import make_logger
+        from selfplaydrive.trainers.run import eval_protocol, make_logger
 
         run_dir = Path(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -313,7 +320,7 @@ class SB3Trainer:
         model_path = run_dir / "model.zip"
         model.save(model_path)
         print(f"sb3: {model.num_timesteps} slot-steps, model saved to {model_path}")
-        summary: dict[str, float] = {}
+        summary: dict[str, object] = {}
         if self.eval_episodes:
             summary = evaluate(
                 model,
@@ -323,11 +330,13 @@ class SB3Trainer:
                 self.eval_deterministic,
                 self.seed + EVAL_SEED_OFFSET,
             )
+            summary.update(eval_protocol(env, self.eval_deterministic))
             _write_json(run_dir / "eval.json", summary)
             shown = ", ".join(
                 f"{k} {summary[k]:.3g}" for k in SUMMARY_KEYS if math.isfinite(summary.get(k, math.nan))
             )
-            print(f"evaluation: {shown} (full summary in {run_dir / 'eval.json'})")
+            how = f"protocol {summary['protocol']} actions {summary['actions']}"
+            print(f"evaluation: {shown} ({how}; full summary in {run_dir / 'eval.json'})")
         return {"agent_steps": int(model.num_timesteps), "model_path": str(model_path), "eval": summary}
 
 

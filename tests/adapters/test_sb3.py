@@ -81,3 +81,15 @@ def test_seed_controls_the_episode(make_env):
     assert not np.array_equal(venv.reset(), a)  # unseeded: the next episode
     with pytest.raises(RuntimeError, match="step_async"):
         venv.step_wait()
+
+
+def test_step_after_close_raises(make_env):
+    venv = SB3VecEnv(make_env(1), seed=0)
+    venv.reset()
+    acts = np.tile(np.array([3, 6]), (venv.num_envs, 1))
+    venv.step(acts)
+    venv.close()
+    with pytest.raises(RuntimeError, match=r"SB3VecEnv\.step_async: the env is closed"):
+        venv.step(acts)
+    with pytest.raises(RuntimeError, match=r"SB3VecEnv\.step_wait: the env is closed"):
+        venv.step_wait()

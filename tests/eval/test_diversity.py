@@ -159,3 +159,15 @@ def test_recorder_on_a_rule_based_rollout(tmp_path):
     assert np.median(np.abs(log.lat_offset)) < 0.5  # the rule-based driver keeps to the centre
     paths = save_diversity(log, tmp_path)
     assert all(p.exists() for p in paths.values())
+
+
+def test_run_diversity_refuses_fixed_evaluation_coefficients():
+    from selfplaydrive.eval.diversity import run_diversity
+    from selfplaydrive.scenario.conditioning import ConditioningSampler
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    spawner = PaperSpawner(conditioning=ConditioningSampler(mode="eval"))
+    with pytest.raises(ValueError, match=r"mode 'eval'.*training distribution"):
+        run_diversity("default", lambda obs, env: None, spawner=spawner, duration_s=1.0)
+    with pytest.raises(ValueError, match="duration_s"):
+        run_diversity("default", lambda obs, env: None, duration_s=0.0)

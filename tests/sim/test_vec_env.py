@@ -283,7 +283,6 @@ def test_smallest_candidate_capacity_gives_the_same_rollout():
     cand_cap the last world wrote past the buffer: other results, heap corruption.)"""
     from selfplaydrive._sim.events import collision_scratch
     from selfplaydrive._sim.observe import body_scratch
-
     from selfplaydrive.maps.loader import load_map
     from selfplaydrive.scenario.spawner import PaperSpawner
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 from ppo_helpers import lane_env
 
-from selfplaydrive.errors import ConfigError
+from selfplaydrive.errors import CheckpointError, ConfigError
 from selfplaydrive.models import DeepSetsModel
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
@@ -66,7 +66,7 @@ def test_checkpoint_from_another_env_configuration_is_refused(tmp_path):
     b = PPOTrainer(env, model, PPOConfig(**CFG))
     with pytest.raises(ValueError, match="expected an env built from the same configuration"):
         b.load(tmp_path / "c.pt")
-    with pytest.raises(FileNotFoundError, match="no such file"):
+    with pytest.raises(CheckpointError, match="no such file"):
         b.load(tmp_path / "missing.pt")
 
 

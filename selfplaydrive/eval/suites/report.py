@@ -3,6 +3,7 @@ section 5.3 in one call, with JSON-ready results (for `selfplaydrive eval`)."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -40,6 +41,7 @@ def run_all_suites(
     batch_size: int = 32,
     env_factory: Callable[..., Any] | None = None,
     suites: Mapping[str, Any] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Run the suites named in `counts` and return their results.
 
@@ -52,6 +54,8 @@ def run_all_suites(
         batch_size: Worlds stepped together.
         env_factory: `(spawner, num_worlds) -> VecEnv` for non-default env settings.
         suites: Suite objects by name (default `default_suites()`).
+        progress: Called with a one-line status before and after each suite (scenarios,
+            wall time); None is silent.
 
     Returns:
         {suite: {"requested", "generated", "summary", "scenarios": [{"info", "result"}]}}; the
@@ -67,25 +71,44 @@ def run_all_suites(
     env = env_factory if env_factory is not None else maps
     root = np.random.default_rng(seed)
     out: dict[str, Any] = {}
+    say = progress or (lambda _msg: None)
     for name in sorted(counts):
         suite, rng = suites[name], np.random.default_rng(root.integers(2**63 - 1))
+        start = time.perf_counter()
         items = generate_all(suite, maps, int(counts[name]), rng)
-        results = [
-            suite.classify(i, t)
-            for i, t in zip(items, run_suite(env, policy, items, batch_size, seed=seed), strict=True)
-        ]
-        entry: dict[str, Any] = {
-            "requested": int(counts[name]),
-            "generated": len(items),
-            "summary": suite.summarise(results),
-            "scenarios": [{"info": i.info, "result": r} for i, r in zip(items, results, strict=True)],
-        }
-        if name == "stop_lines":
-            trajs = run_suite(env, policy, items, batch_size, hide_stop_lines_obs=True, seed=seed)
-            hidden = [suite.classify(i, t) for i, t in zip(items, trajs, strict=True)]
-            entry["hidden_summary"] = suite.summarise(hidden)
-            entry["changed"] = compare_runs(results, hidden)
-            for row, r in zip(entry["scenarios"], hidden, strict=True):
-                row["result_hidden"] = r
-        out[name] = entry
+        runs = "2 runs (stop lines shown, hidden)" if name == "stop_lines" else "1 run"
+        say(f"suites: {name}: {len(items)} scenarios generated (count={int(counts[name])}), {runs} ...")
+        out[name] = _run_one(name, suite, items, int(counts[name]), env, policy, batch_size, seed)
+        say(f"suites: {name}: done in {time.perf_counter() - start:.1f} s")
     return out
+
+
+def _run_one(
+    name: str,
+    suite: Any,
+    items: list[SuiteScenario],
+    requested: int,
+    env: Any,
+    policy: PolicyFactory,
+    batch_size: int,
+    seed: int,
+) -> dict[str, Any]:
+    """Drive and classify one suite's scenarios (the stop-line suite twice, see `run_all_suites`)."""
+    results = [
+        suite.classify(i, t)
+        for i, t in zip(items, run_suite(env, policy, items, batch_size, seed=seed), strict=True)
+    ]
+    entry: dict[str, Any] = {
+        "requested": requested,
+        "generated": len(items),
+        "summary": suite.summarise(results),
+        "scenarios": [{"info": i.info, "result": r} for i, r in zip(items, results, strict=True)],
+    }
+    if name == "stop_lines":
+        trajs = run_suite(env, policy, items, batch_size, hide_stop_lines_obs=True, seed=seed)
+        hidden = [suite.classify(i, t) for i, t in zip(items, trajs, strict=True)]
+        entry["hidden_summary"] = suite.summarise(hidden)
+        entry["changed"] = compare_runs(results, hidden)
+        for row, r in zip(entry["scenarios"], hidden, strict=True):
+            row["result_hidden"] = r
+    return entry

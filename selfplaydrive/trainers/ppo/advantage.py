@@ -14,8 +14,11 @@ that did not act get A_t = 0, so nothing flows across an autoreset or out of a p
 
 from __future__ import annotations
 
-import torch
-from torch import Tensor
+from selfplaydrive._optional import requires_extra
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor
 
 
 def compute_gae(

@@ -9,9 +9,11 @@ construction with the key, the value and what was expected.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 from selfplaydrive.errors import ConfigError
+from selfplaydrive.trainers.callbacks import callback_name
 
 PRECISIONS = ("auto", "fp32", "bf16")
 
@@ -119,6 +121,10 @@ class PPOConfig:
     progress_bar: bool = True
     """Show a tqdm progress bar with SPS and ETA (rank 0 only)."""
 
+    callbacks: list[Any] = field(default_factory=list)
+    """Objects with any of the hooks of `selfplaydrive.trainers.callbacks` (on_start, on_step,
+    on_update, on_end), or config mappings with a `_target_` that the trainer instantiates."""
+
     def __post_init__(self) -> None:
         self.validate()
 
@@ -143,12 +149,17 @@ class PPOConfig:
             _bad("target_kl", self.target_kl, "None or a number > 0")
         if self.precision not in PRECISIONS:
             _bad("precision", self.precision, f"one of {PRECISIONS}")
+        if not isinstance(self.callbacks, list | tuple):
+            _bad("callbacks", self.callbacks, "a list of callback objects or _target_ mappings")
         if not (self.device == "auto" or self.device == "cpu" or self.device.startswith("cuda")):
             _bad("device", self.device, "'auto', 'cpu', 'cuda' or 'cuda:N'")
 
     def to_dict(self) -> dict[str, object]:
-        """Plain dict of every field (for the run folder and checkpoints)."""
-        return asdict(self)
+        """Plain dict of every field (for the run folder and checkpoints); callbacks appear as
+        their `module.Class` names, so the dict stays plain data."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["callbacks"] = [callback_name(c) for c in self.callbacks]
+        return out
 
     @classmethod
     def from_dict(cls, values: dict[str, object]) -> PPOConfig:

@@ -12,9 +12,12 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-import torch
-import torch.distributed as td
-from torch import Tensor, nn
+from selfplaydrive._optional import requires_extra
+
+with requires_extra("torch"):
+    import torch
+    import torch.distributed as td
+    from torch import Tensor, nn
 
 
 @dataclass(frozen=True)

@@ -12,15 +12,24 @@ The contract the trainers use is small: `scalars(values, step)`, `progress(updat
 `text(message)`, `close()`. A logger of your own needs only those four methods and a
 constructor taking the keyword arguments in `LOGGER_ARGS`, which the trainer fills at run
 time (the config lists only the other arguments, with `_partial_: true`).
+
+Optional: `truncate(step)`, called by `train_run` when a run resumes from a checkpoint taken at
+`step`, drops what an earlier attempt logged after it, so a resumed run has no duplicate rows.
+
+Reproducibility: every logged value is a function of the seed and the config except the tags in
+`WALL_CLOCK_TAGS` (throughput, and the JSONL line's `time`), which two identical runs differ in.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any, Protocol
+
+from selfplaydrive._optional import requires_extra
 
 # label on the progress bar -> metric keys, first present wins: the sliding window of recent
 # episodes (`recent/*`, PPOTrainer) is steadier than one update's few finished episodes
@@ -31,6 +40,8 @@ PROGRESS_KEYS = {
 }
 # constructor arguments every logger takes from the trainer, never from YAML
 LOGGER_ARGS = ("run_dir", "total_updates", "progress_bar", "enabled", "initial")
+# values that depend on the wall clock, not on the seed: leave them out when comparing runs
+WALL_CLOCK_TAGS = ("time", "charts/sps", "charts/collect_sps", "charts/slot_sps")
 
 
 class Logger(Protocol):
@@ -110,13 +121,20 @@ class ProgressLogger:
         self.bar.update(updates)
 
     def text(self, message: str) -> None:
-        """Print a line without breaking the bar."""
+        """Print a line without breaking the bar (a full bar is closed first: redrawn under
+        the line, it would show twice at the end of a run)."""
         if not self.enabled:
             return
+        if self.bar is not None and self.bar.total and self.bar.n >= self.bar.total:
+            self.bar.close()
+            self.bar = None
         if self.bar is not None:
             self.bar.write(message)
         else:
             print(message)
+
+    def truncate(self, step: int) -> None:
+        """Forget what was logged after `step` (a resumed run; nothing is stored here)."""
 
     def close(self) -> None:
         """Close the bar and flush what was written."""
@@ -148,10 +166,23 @@ class TensorBoardLogger(ProgressLogger):
     ) -> None:
         super().__init__(run_dir, total_updates, progress_bar, enabled, initial)
         self.writer = None
+        self.log_dir = None if run_dir is None else Path(run_dir) / subdir
+        self.flush_secs = int(flush_secs)
         if enabled and run_dir is not None:
+            self.writer = self._open()
+
+    def _open(self, purge_step: int | None = None) -> Any:
+        with requires_extra("train"):  # torch.utils.tensorboard needs the tensorboard package
             from torch.utils.tensorboard import SummaryWriter
 
-            self.writer = SummaryWriter(log_dir=str(Path(run_dir) / subdir), flush_secs=int(flush_secs))
+        return SummaryWriter(log_dir=str(self.log_dir), flush_secs=self.flush_secs, purge_step=purge_step)
+
+    def truncate(self, step: int) -> None:
+        """Hide the events after `step` from TensorBoard: a new event file whose `purge_step`
+        tells TensorBoard to drop later steps of the earlier files."""
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = self._open(purge_step=int(step) + 1)
 
     def _write(self, tags: dict[str, float], step: int) -> None:
         if self.writer is not None:
@@ -192,10 +223,23 @@ class JsonlLogger(ProgressLogger):
     ) -> None:
         super().__init__(run_dir, total_updates, progress_bar, enabled, initial)
         self.file = None
-        if enabled and run_dir is not None:
-            path = Path(run_dir) / filename
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self.file = path.open("a", encoding="utf-8")
+        self.path = None if run_dir is None else Path(run_dir) / filename
+        if enabled and self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.file = self.path.open("a", encoding="utf-8")
+
+    def truncate(self, step: int) -> None:
+        """Drop the lines with a `step` after `step` (and a half-written last line of a killed
+        run), rewriting the file atomically, so a resumed run appends without duplicates."""
+        if self.file is None or self.path is None:
+            return
+        self.file.close()
+        lines = self.path.read_text(encoding="utf-8").splitlines()
+        kept = [line for line in lines if _step_at_most(line, step)]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("".join(line + "\n" for line in kept), encoding="utf-8")
+        os.replace(tmp, self.path)
+        self.file = self.path.open("a", encoding="utf-8")
 
     def _write(self, tags: dict[str, float], step: int) -> None:
         if self.file is not None:
@@ -207,3 +251,12 @@ class JsonlLogger(ProgressLogger):
         if self.file is not None:
             self.file.close()
             self.file = None
+
+
+def _step_at_most(line: str, step: int) -> bool:
+    """The JSON line `line` is complete and logged at a step <= `step`."""
+    try:
+        row = json.loads(line)
+    except json.JSONDecodeError:
+        return False
+    return isinstance(row, dict) and isinstance(row.get("step"), int) and row["step"] <= step

@@ -6,8 +6,11 @@ minibatch changes neither the loss scale nor the gradient of real entries.
 
 from __future__ import annotations
 
-import torch
-from torch import Tensor
+from selfplaydrive._optional import requires_extra
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor
 
 
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:

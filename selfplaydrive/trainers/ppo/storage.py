@@ -9,8 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-import torch
-from torch import Tensor
+from selfplaydrive._optional import requires_extra
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor
+
 
 State = tuple[Tensor, ...]
 

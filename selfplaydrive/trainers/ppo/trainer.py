@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from collections.abc import Mapping
 from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
-import torch
-from torch import Tensor, nn
 
+from selfplaydrive._optional import requires_extra
+from selfplaydrive.errors import CheckpointError
 from selfplaydrive.models.common import entropy, log_prob, sample_actions
+from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.advantage import compute_gae
 from selfplaydrive.trainers.ppo.config import PPOConfig
@@ -26,6 +28,10 @@ from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 from selfplaydrive.trainers.ppo.logging import RunLogger
 from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
+
+with requires_extra("torch"):
+    import torch
+    from torch import Tensor, nn
 
 
 def resolve_device(name: str, info: DistInfo) -> torch.device:
@@ -58,6 +64,10 @@ class PPOTrainer:
         model: A `selfplaydrive.models.PolicyModel` (e.g. `DeepSetsModel`, `TransformerModel`).
         config: Hyperparameters (`PPOConfig`).
         run_dir: Folder for TensorBoard files and checkpoints (None: neither is written).
+
+    Callbacks (`config.callbacks`, contract in `selfplaydrive.trainers.callbacks`) are built
+    once here and called from `collect` (`on_step`) and `train` (`on_start`, `on_update`,
+    `on_end`); their `state_dict` travels in the checkpoints.
 
     Raises:
         ValueError: The env has continuous actions, or the model's action sizes do not match.
@@ -101,6 +111,7 @@ class PPOTrainer:
         self.next_start = torch.ones(self.num_slots, dtype=torch.bool, device=self.device)
         self.pinned = self.device.type == "cuda"
         self._staging: dict[str, Tensor] = {}
+        self.callbacks = build_callbacks(config.callbacks)
 
     # ---------------------------------------------------------------------------------------
     # setup helpers
@@ -194,6 +205,7 @@ class PPOTrainer:
                 s.actions[t], s.active[t]
             )
             self.agent_steps += int(self.env.reward_mask.sum())
+            self._call("on_step")
         self.global_step += self.slots_per_update
 
     # ---------------------------------------------------------------------------------------
@@ -279,7 +291,10 @@ class PPOTrainer:
         if num_updates is not None:
             stop = min(stop, self.update_idx + num_updates)
         metrics: dict[str, float] = {}
+        ran = False
+        self._call("on_start")
         while self.update_idx < stop:
+            ran = True
             t0, steps0 = time.perf_counter(), self.agent_steps
             self.collect()
             self.compute_advantages()
@@ -291,13 +306,27 @@ class PPOTrainer:
             records, returns = self.tracker.pop()
             metrics.update(summarize(records, returns))
             metrics.update(self._recent(records, returns))
+            for extra in self._call("on_update", metrics):
+                if isinstance(extra, Mapping):
+                    metrics.update(extra)
             if logger is not None:
                 if self.update_idx % cfg.log_interval == 0:
                     logger.scalars(metrics, self.global_step * self.dist.world_size)
                 logger.progress(1, metrics)
             if cfg.checkpoint_interval and self.update_idx % cfg.checkpoint_interval == 0:
                 self.save_periodic()
+        if ran and self.update_idx >= self.total_updates:
+            self._call("on_end", metrics)
         return metrics
+
+    def _call(self, hook: str, *args: object) -> list[object]:
+        """Call `hook(self, *args)` on every callback that defines it; returns the results."""
+        out = []
+        for callback in self.callbacks:
+            method = getattr(callback, hook, None)
+            if method is not None:
+                out.append(method(self, *args))
+        return out
 
     def _recent(self, records: list[dict[str, object]], returns: list[float]) -> dict[str, float]:
         """`recent/<key>` over the last `RECENT_WORLD_EPISODES` finished world-episodes."""
@@ -354,6 +383,10 @@ class PPOTrainer:
             "tracker": self.tracker.state_dict(),
             "recent": (list(self.recent), list(self.recent_returns)),
             "env": ckpt.env_state(self.env),
+            "callbacks": [
+                {"name": callback_name(c), "state": c.state_dict() if hasattr(c, "state_dict") else None}
+                for c in self.callbacks
+            ],
         }
 
     def load_state_dict(self, payload: dict[str, object]) -> None:
@@ -375,12 +408,36 @@ class PPOTrainer:
             self.recent_returns.extend(payload["recent"][1])
         if "rng" in payload:
             ckpt.set_rng_state(payload["rng"])
+        self._load_callbacks(payload.get("callbacks", []))
+
+    def _load_callbacks(self, saved: list[dict[str, object]]) -> None:
+        """Restore the callbacks' states by position where the saved name matches (a callback
+        added on resume starts fresh; one dropped is ignored)."""
+        for callback, entry in zip(self.callbacks, saved, strict=False):
+            if entry["name"] == callback_name(callback) and entry["state"] is not None:
+                if hasattr(callback, "load_state_dict"):
+                    callback.load_state_dict(entry["state"])
 
     def save(self, path: str | Path) -> Path:
-        return ckpt.save(path, self.state_dict())
+        """Write a checkpoint of `state_dict()` to `path` atomically (`checkpoint.save`)."""
+        return ckpt.save(path, self.state_dict(), self.dist.rank)
 
     def load(self, path: str | Path) -> None:
-        self.load_state_dict(ckpt.load(path, map_location="cpu"))
+        """Continue from the checkpoint at `path` (exactly, see checkpoint.py).
+
+        Raises:
+            CheckpointError: The file is missing, unreadable or foreign (`checkpoint.load`), or
+                was written for another env or model configuration.
+        """
+        payload = ckpt.load(path, map_location="cpu")
+        try:
+            self.load_state_dict(payload)
+        except CheckpointError:
+            raise
+        except (ValueError, RuntimeError, KeyError, TypeError) as exc:
+            # a model of other sizes (RuntimeError), an env of another shape (ValueError) ...
+            detail = " ".join(str(exc).split())[:300]
+            raise CheckpointError(f"does not fit this trainer: {detail}", path) from exc
 
     def save_periodic(self) -> Path | None:
         """Checkpoint into `<run_dir>/checkpoints` (every rank its own file) and prune old ones."""

@@ -1,0 +1,3 @@
+"""Type stub of the Cython module `selfplaydrive._sim.events` (only its Python-visible names)."""
+
+def collision_scratch(A: int, S: int, P: int) -> int: ...

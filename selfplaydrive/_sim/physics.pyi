@@ -1,0 +1,2 @@
+"""Type stub of the Cython module `selfplaydrive._sim.physics`: its kernels are cdef only, so
+Python sees no names."""

@@ -1,0 +1,3 @@
+"""Type stub of the Cython module `selfplaydrive._sim.road` (only its Python-visible names)."""
+
+def _set_simd(level: int) -> int: ...

@@ -1,0 +1,202 @@
+"""Trainer callbacks: code that runs inside `PPOTrainer.train` without editing the trainer.
+
+Contract (docs/training.md, "Callbacks"). A callback is any object; the trainer calls each of
+these methods only where the object defines it, in the order the callbacks are listed:
+
+- `on_start(trainer)`: at the start of every `train()` call (also after a resume), before
+  the first update of that call.
+- `on_step(trainer)`: after every env step of a training rollout (not of the evaluation);
+  `trainer.env` holds the step's results. Keep it cheap: it runs rollout_length times per
+  update.
+- `on_update(trainer, metrics)`: after every update, before the metrics are logged. A mapping
+  it returns is merged into `metrics` (and so logged); `trainer.update_idx` counts the updates
+  done, this one included.
+- `on_end(trainer, metrics)`: when a `train()` call reaches `trainer.total_updates`.
+- `state_dict()` / `load_state_dict(state)`: the callback's state, saved in every checkpoint
+  and restored on resume. It must be plain data (tensors, NumPy arrays, numbers, strings,
+  lists, tuples, dicts): checkpoints are loaded with `weights_only=True`.
+
+From Hydra, list callbacks under the trainer config, each a node with a `_target_`:
+
+    selfplaydrive train 'trainer.callbacks=[{_target_: selfplaydrive.trainers.callbacks.DiversityCallback}]'
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from selfplaydrive.errors import ConfigError
+
+HOOKS = ("on_start", "on_step", "on_update", "on_end", "state_dict", "load_state_dict")
+
+
+def build_callbacks(specs: Sequence[Any]) -> list[Any]:
+    """Objects from `PPOConfig.callbacks`: mappings with a `_target_` are instantiated, other
+    entries are used as they are.
+
+    Raises:
+        ConfigError: An entry that is neither a `_target_` mapping nor an object with at least
+            one hook of `HOOKS`, naming its index.
+    """
+    out = []
+    for i, spec in enumerate(specs):
+        if isinstance(spec, Mapping):
+            if "_target_" not in spec:
+                raise ConfigError(f"trainer.callbacks[{i}] = {dict(spec)!r}: expected a node with _target_")
+            from selfplaydrive.builder import instantiate
+
+            spec = instantiate(spec)
+        if not any(callable(getattr(spec, hook, None)) for hook in HOOKS):
+            raise ConfigError(
+                f"trainer.callbacks[{i}] = {spec!r}: expected an object with at least one of "
+                f"{', '.join(HOOKS)}"
+            )
+        out.append(spec)
+    return out
+
+
+def callback_name(callback: Any) -> str:
+    """`module.Class` of a callback (how config.json and checkpoints refer to it)."""
+    if isinstance(callback, Mapping):
+        return str(callback.get("_target_", "?"))
+    kind = type(callback)
+    return f"{kind.__module__}.{kind.__qualname__}"
+
+
+class DiversityCallback:
+    """Record behaviour-diversity data over the last `fraction` of training (paper section 5.4)
+    and write it with `selfplaydrive.eval.diversity.save_diversity` when training ends.
+
+    The recorder (`DiversityRecorder`) reads the training env after every env step of the
+    window: road-edge and vehicle-collision onsets with the agents' coefficients, lateral
+    offsets against the lane-centre bias, and the exposure of each coefficient bin.
+
+    Args:
+        fraction: Share of the updates, counted from the end, that are recorded (the paper: the
+            last 10 %); at least one update is.
+        out_dir: Folder for the PNGs, CSV tables and `diversity.json`, relative to the run folder
+            (rank r > 0 of a torchrun job writes `<out_dir>.rank<r>`). Nothing is written
+            without a run folder; `log()` still returns the data.
+        lateral_every: Env steps between lateral-offset samples.
+        exposure_every: Env steps between exposure samples.
+
+    Attributes:
+        paths: What `save_diversity` wrote (empty before the end of training).
+    """
+
+    def __init__(
+        self,
+        fraction: float = 0.1,
+        out_dir: str = "diversity",
+        lateral_every: int = 10,
+        exposure_every: int = 10,
+    ) -> None:
+        if not (isinstance(fraction, int | float) and 0.0 < fraction <= 1.0):
+            raise ConfigError(f"DiversityCallback.fraction = {fraction!r}: expected a number in (0, 1]")
+        for name, value in (("lateral_every", lateral_every), ("exposure_every", exposure_every)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"DiversityCallback.{name} = {value!r}: expected an int >= 1")
+        self.fraction, self.out_dir = float(fraction), str(out_dir)
+        self.lateral_every, self.exposure_every = lateral_every, exposure_every
+        self.recorder: Any = None
+        self.paths: dict[str, Path] = {}
+        self._pending: dict[str, Any] | None = None  # a checkpoint's state, applied once the env is known
+
+    def first_update(self, total_updates: int) -> int:
+        """Index of the first recorded update (0-based) of a run of `total_updates` updates."""
+        return total_updates - max(1, math.ceil(self.fraction * total_updates))
+
+    def on_start(self, trainer: Any) -> None:
+        if self.recorder is None and self._pending is not None:
+            self._make_recorder(trainer.env)
+            _restore_recorder(self.recorder, self._pending)
+            self._pending = None
+
+    def on_step(self, trainer: Any) -> None:
+        if trainer.update_idx < self.first_update(trainer.total_updates):
+            return
+        if self.recorder is None:
+            self._make_recorder(trainer.env)
+        self.recorder.record()
+
+    def on_update(self, trainer: Any, metrics: Mapping[str, float]) -> dict[str, float]:
+        """Running event counts of the window, logged as `diversity/*` scalars."""
+        if self.recorder is None:
+            return {}
+        log = self.recorder.log()
+        return {
+            "diversity/offroad_events": float(len(log.offroad_c)),
+            "diversity/collision_events": float(len(log.coll_self)),
+            "diversity/lateral_samples": float(len(log.lat_bias)),
+        }
+
+    def on_end(self, trainer: Any, metrics: Mapping[str, float]) -> None:
+        if self.recorder is None or trainer.run_dir is None:
+            return
+        from selfplaydrive.eval.diversity import save_diversity
+
+        rank = trainer.dist.rank
+        folder = Path(trainer.run_dir) / (self.out_dir if rank == 0 else f"{self.out_dir}.rank{rank}")
+        self.paths = save_diversity(self.recorder.log(), folder)
+
+    def log(self) -> Any:
+        """The `DiversityLog` recorded so far (None before the window started)."""
+        return None if self.recorder is None else self.recorder.log()
+
+    def state_dict(self) -> dict[str, Any]:
+        """The recorded data as plain arrays (empty before the window started)."""
+        if self.recorder is None:
+            return dict(self._pending or {})
+        log = self.recorder.log()
+        state = {name: getattr(log, name) for name in _LOG_FIELDS}
+        state["prev_events"] = self.recorder._prev.copy()
+        state["steps"] = int(self.recorder._steps)
+        return state
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        # the recorder needs the env, which on_start brings
+        self.recorder = None
+        self._pending = dict(state) if state else None
+
+    def _make_recorder(self, env: Any) -> None:
+        from selfplaydrive.eval.diversity import DiversityRecorder
+
+        self.recorder = DiversityRecorder(env, self.lateral_every, self.exposure_every)
+
+
+_LOG_FIELDS = (
+    "offroad_c",
+    "coll_self",
+    "coll_partner",
+    "coll_kind",
+    "coll_overlap",
+    "lat_bias",
+    "lat_offset",
+    "offroad_exposure",
+    "pair_exposure",
+)
+
+
+def _restore_recorder(recorder: Any, state: Mapping[str, Any]) -> None:
+    """Put `DiversityCallback.state_dict()` back into a fresh `DiversityRecorder`.
+
+    The recorder keeps its data in private lists (selfplaydrive/eval/diversity.py); they are
+    rebuilt here from the log's arrays, one chunk each, which `log()` concatenates unchanged.
+    """
+    recorder._off = [np.asarray(state["offroad_c"], dtype=np.float64)]
+    recorder._coll = [
+        (float(a), float(b), str(k), bool(o))
+        for a, b, k, o in zip(
+            state["coll_self"], state["coll_partner"], state["coll_kind"], state["coll_overlap"], strict=True
+        )
+    ]
+    recorder._lat = [np.c_[state["lat_bias"], state["lat_offset"]].astype(np.float64)]
+    recorder._off_exp = np.array(state["offroad_exposure"], dtype=np.float64)
+    recorder._pair_exp = np.array(state["pair_exposure"], dtype=np.float64)
+    recorder._prev = np.array(state["prev_events"], dtype=np.uint8)
+    recorder._steps = int(state["steps"])

@@ -1,0 +1,95 @@
+"""`selfplaydrive train` end to end on the bundled town, a few tiny updates per run:
+same seed -> same metrics and parameters; `resume=` continues a run exactly, without
+duplicate metric rows; the evaluation names its protocol."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from selfplaydrive.cli import main  # noqa: E402
+from selfplaydrive.trainers.ppo.logging import WALL_CLOCK_TAGS  # noqa: E402
+
+# 1 world x 32 agent slots x 8 steps = 256 slot-steps per update; no lr annealing, so the first
+# updates of a long run equal those of a short one (the resume comparison needs that)
+UPDATE = 256
+TINY = [
+    "env.num_worlds=1",
+    "trainer.rollout_length=8",
+    "trainer.anneal_lr=false",
+    "trainer.checkpoint_interval=1",
+    "trainer.keep_checkpoints=10",
+    "trainer.eval_episodes=1",
+    "trainer.eval_max_steps=20",
+    "trainer.progress_bar=false",
+    "logger=jsonl",
+]
+
+
+def train(out: Path, updates: int, *extra: str) -> Path:
+    code = main(["train", *TINY, f"trainer.total_steps={updates * UPDATE}", f"hydra.run.dir={out}", *extra])
+    assert code == 0
+    return out
+
+
+def rows(run: Path) -> list[dict[str, float]]:
+    """metrics.jsonl without the wall-clock fields (throughput and the line's time stamp)."""
+    lines = (run / "metrics.jsonl").read_text().splitlines()
+    return [{k: v for k, v in json.loads(line).items() if k not in WALL_CLOCK_TAGS} for line in lines]
+
+
+def params(run: Path) -> dict[str, torch.Tensor]:
+    return torch.load(run / "checkpoints" / "final.pt", weights_only=False)["model"]
+
+
+def assert_same_params(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> None:
+    assert a.keys() == b.keys()
+    for name in a:
+        assert torch.equal(a[name], b[name]), name
+
+
+def test_same_seed_same_run_and_another_seed_differs(tmp_path):
+    a = train(tmp_path / "a", 2, "seed=3")
+    b = train(tmp_path / "b", 2, "seed=3")  # same process: torch's global generator has moved on
+    c = train(tmp_path / "c", 2, "seed=4")
+    assert len(rows(a)) == 2 and [r["step"] for r in rows(a)] == [UPDATE, 2 * UPDATE]
+    assert rows(a) == rows(b)
+    assert_same_params(params(a), params(b))
+    # the initial weights follow the seed too: another seed gives other parameters
+    assert any(not torch.equal(p, params(c)[k]) for k, p in params(a).items())
+    summary = json.loads((a / "eval.json").read_text())
+    assert summary["protocol"] == "training_distribution" and summary["actions"] == "sampled"
+
+
+def test_resume_from_folder_and_checkpoint_matches_an_uninterrupted_run(tmp_path):
+    full = train(tmp_path / "full", 4, "seed=1")
+    run = train(tmp_path / "run", 2, "seed=1")
+    # a killed checkpoint writer leaves a .tmp behind; the resume removes it
+    stale = run / "checkpoints" / "ckpt_0000003.pt.tmp"
+    stale.write_bytes(b"half a checkpoint")
+    # from the run folder (its newest checkpoint, update 2) to update 3, in the same folder
+    train(tmp_path / "resume1", 3, "seed=1", f"resume={run}")
+    assert not stale.exists()
+    assert [r["step"] for r in rows(run)] == [UPDATE * k for k in (1, 2, 3)]
+    note = json.loads((tmp_path / "resume1" / "resume.json").read_text())
+    assert note["update"] == 2 and Path(note["run_folder"]) == run
+    # from an older checkpoint file: the rows after it (update 3) are dropped, then rewritten
+    train(tmp_path / "resume2", 4, "seed=1", f"resume={run / 'checkpoints' / 'ckpt_0000002.pt'}")
+    steps = [r["step"] for r in rows(run)]
+    assert steps == [UPDATE * k for k in (1, 2, 3, 4)], "duplicate or missing rows after a resume"
+    assert rows(run) == rows(full)
+    assert_same_params(params(run), params(full))
+    assert len((run / "resumes.jsonl").read_text().splitlines()) == 2
+
+
+def test_resume_of_a_missing_folder_fails_with_one_line_naming_it(tmp_path, capsys):
+    where = tmp_path / "nowhere"
+    code = main(["train", *TINY, f"hydra.run.dir={tmp_path / 'x'}", f"resume={where}"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1
+    assert err.startswith("selfplaydrive train: error:") and "\n" not in err
+    assert str(where) in err and "no such file or folder" in err

@@ -1,0 +1,128 @@
+"""Trainer callbacks: the hooks run where the contract says, returned scalars are logged, bad
+entries are refused by index, and DiversityCallback records only the last part of training,
+writes the section 5.4 data and survives a resume exactly."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from ppo_helpers import TinyPolicy, lane_env
+
+from selfplaydrive.builder import compose, instantiate
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.trainers import PPOConfig, PPOTrainer
+from selfplaydrive.trainers.callbacks import DiversityCallback, build_callbacks
+
+T = 6  # rollout_length
+CFG = dict(
+    total_steps=5 * T * 12,  # 5 updates of 3 worlds x 4 slots
+    rollout_length=T,
+    num_minibatches=2,
+    num_epochs=1,
+    device="cpu",
+    progress_bar=False,
+    checkpoint_interval=0,
+    torch_threads=1,
+)
+
+
+class Recorder:
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, int]] = []
+
+    def on_start(self, trainer) -> None:
+        self.calls.append(("start", trainer.update_idx))
+
+    def on_step(self, trainer) -> None:
+        self.calls.append(("step", trainer.update_idx))
+
+    def on_update(self, trainer, metrics) -> dict[str, float]:
+        self.calls.append(("update", trainer.update_idx))
+        return {"custom/update": float(trainer.update_idx)}
+
+    def on_end(self, trainer, metrics) -> None:
+        self.calls.append(("end", trainer.update_idx))
+
+
+class ListLogger:
+    def __init__(self) -> None:
+        self.rows: list[dict[str, float]] = []
+
+    def scalars(self, values, step) -> None:
+        self.rows.append(dict(values))
+
+    def progress(self, updates, values) -> None:
+        pass
+
+
+def make_trainer(callbacks, run_dir=None, **cfg) -> PPOTrainer:
+    torch.manual_seed(0)
+    env = lane_env(num_worlds=3, episode_length=1.5)
+    model = TinyPolicy(env.layout.obs_dim, env.action_space.nvec)
+    return PPOTrainer(env, model, PPOConfig(**dict(CFG, callbacks=callbacks, **cfg)), run_dir)
+
+
+def test_hooks_run_in_order_and_returned_scalars_are_logged():
+    cb, logger = Recorder(), ListLogger()
+    trainer = make_trainer([cb])
+    trainer.train(3, logger=logger)
+    trainer.train(logger=logger)  # on to total_updates = 5: on_end once, at the end
+    kinds = [k for k, _ in cb.calls]
+    assert kinds.count("start") == 2 and kinds.count("end") == 1 and kinds[-1] == "end"
+    assert kinds.count("step") == 5 * T and kinds.count("update") == 5
+    assert [u for k, u in cb.calls if k == "update"] == [1, 2, 3, 4, 5]
+    assert [row["custom/update"] for row in logger.rows] == [1.0, 2.0, 3.0, 4.0, 5.0]
+    trainer.evaluate(1, 20, False, seed=9)  # the evaluation's steps are not training steps
+    assert [k for k, _ in cb.calls].count("step") == 5 * T
+    assert trainer.config.to_dict()["callbacks"] == [f"{__name__}.Recorder"]
+
+
+def test_bad_callback_entries_are_refused_by_index():
+    with pytest.raises(ConfigError, match=r"trainer.callbacks\[1\] = .*expected an object with at least one"):
+        build_callbacks([Recorder(), object()])
+    with pytest.raises(ConfigError, match=r"trainer.callbacks\[0\] = \{'fraction': 0.5\}: expected a node"):
+        build_callbacks([{"fraction": 0.5}])
+    with pytest.raises(ConfigError, match=r"DiversityCallback.fraction = 0: expected a number in \(0, 1\]"):
+        DiversityCallback(fraction=0)
+
+
+def test_callbacks_from_the_trainer_config():
+    target = "selfplaydrive.trainers.callbacks.DiversityCallback"
+    cfg = compose("train", [f"trainer.callbacks=[{{_target_: {target}, fraction: 0.5}}]"])
+    config = instantiate(cfg.trainer)
+    assert isinstance(config.callbacks[0], DiversityCallback) and config.callbacks[0].fraction == 0.5
+
+
+def test_diversity_callback_records_the_last_tenth_and_writes_the_analysis(tmp_path):
+    cb = DiversityCallback(fraction=0.2, lateral_every=1, exposure_every=1)
+    trainer = make_trainer([cb], tmp_path, total_steps=10 * T * 12)  # 10 updates: the last 2
+    assert cb.first_update(10) == 8
+    trainer.train(8)
+    assert cb.log() is None  # nothing before the window
+    trainer.train()
+    log = cb.log()
+    assert cb.recorder._steps == 2 * T
+    assert log.offroad_exposure.sum() > 0 and len(log.lat_bias) > 0
+    data = json.loads((tmp_path / "diversity" / "diversity.json").read_text())
+    assert data["offroad"]["exposure"] == pytest.approx(list(log.offroad_exposure))
+    assert (tmp_path / "diversity" / "lateral_vs_bias.png").is_file()
+
+
+def test_diversity_state_survives_a_resume_exactly(tmp_path):
+    a_cb = DiversityCallback(fraction=0.5, lateral_every=1, exposure_every=1)
+    a = make_trainer([a_cb], None, total_steps=6 * T * 12)  # window: updates 3, 4, 5
+    a.train(4)
+    a.save(tmp_path / "mid.pt")
+    a.train()
+    b_cb = DiversityCallback(fraction=0.5, lateral_every=1, exposure_every=1)
+    b = make_trainer([b_cb], None, total_steps=6 * T * 12)
+    b.load(tmp_path / "mid.pt")
+    b.train()
+    la, lb = a_cb.log(), b_cb.log()
+    for name in ("offroad_c", "coll_self", "lat_bias", "lat_offset", "offroad_exposure", "pair_exposure"):
+        np.testing.assert_array_equal(getattr(la, name), getattr(lb, name), err_msg=name)
+    assert b_cb.recorder._steps == a_cb.recorder._steps == 3 * T
+    assert len(la.lat_bias) > 0
