@@ -66,7 +66,10 @@ class KernelTerm:
             raise ConfigError(
                 f"reward term {self.name!r}: address must be a positive integer, got {self.address!r}"
             )
-        args = tuple(float(a) for a in self.args)
+        try:
+            args = tuple(float(a) for a in self.args)
+        except (TypeError, ValueError):
+            args = (math.nan,)
         if not all(math.isfinite(a) for a in args):
             raise ConfigError(f"reward term {self.name!r}: args must be finite numbers, got {self.args!r}")
         object.__setattr__(self, "args", args)
@@ -162,12 +165,45 @@ def _paper_terms() -> dict[str, KernelTerm]:
 
 
 _REGISTRY: dict[str, Term] = {}
+# installed packages offer terms under this entry-point group (name = term name, value = a
+# term object or a factory returning one): `pip install` a term package and name it in
+# `reward.terms`, no registration code (examples/speed_limit_cython/pyproject.toml)
+ENTRY_POINT_GROUP = "selfplaydrive.reward_terms"
 
 
 def _registry() -> dict[str, Term]:
     if not _REGISTRY:  # the kernels are imported at first use: this module stays cheap to import
         _REGISTRY.update(_paper_terms())
     return _REGISTRY
+
+
+def _entry_points() -> dict[str, Any]:
+    """Installed terms not loaded yet: name -> entry point."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name not in _registry()}
+
+
+def _lookup(name: str) -> Term | None:
+    """The registered term `name`, loading an installed one on first use; None if unknown."""
+    reg = _registry()
+    if name in reg:
+        return reg[name]
+    ep = _entry_points().get(name)
+    if ep is None:
+        return None
+    try:
+        obj = ep.load()
+        term = obj if isinstance(obj, KernelTerm) or hasattr(obj, "name") else obj()
+        _check_term(term)
+    except Exception as exc:  # any failure of a third-party plug-in is reported as a config error
+        raise ConfigError(f"reward term {name!r}: loading entry point {ep.value!r} failed: {exc}") from exc
+    if isinstance(term, KernelTerm) and term.name != name:
+        term = term.renamed(name)
+    if term.name != name:
+        raise ConfigError(f"reward term {name!r}: entry point {ep.value!r} gave a term named {term.name!r}")
+    reg[name] = term
+    return term
 
 
 def register_term(term: Term, *, replace: bool = False) -> Term:
@@ -192,8 +228,9 @@ def register_term(term: Term, *, replace: bool = False) -> Term:
 
 
 def registered_terms() -> tuple[str, ...]:
-    """Names `LinearReward` accepts without further arguments (the paper's eight first)."""
-    return tuple(_registry())
+    """Names `LinearReward` accepts without further arguments: the paper's eight first, then
+    registered ones, then those installed packages offer (entry points, loaded on first use)."""
+    return (*_registry(), *_entry_points())
 
 
 def get_term(name: str) -> Term:
@@ -202,10 +239,12 @@ def get_term(name: str) -> Term:
     Raises:
         ConfigError: An unknown name, listing the registered ones.
     """
-    reg = _registry()
-    if name not in reg:
-        raise ConfigError(f"reward term {name!r} is not registered; registered terms: {', '.join(reg)}")
-    return reg[name]
+    term = _lookup(name)
+    if term is None:
+        raise ConfigError(
+            f"reward term {name!r} is not registered; registered terms: {', '.join(registered_terms())}"
+        )
+    return term
 
 
 # composition -------------------------------------------------------------------------------
@@ -229,7 +268,10 @@ class LinearReward:
     Args:
         weights: Term name -> weight, in column order (default: the paper's eight terms, each
             with weight 1, which reproduces the paper's reward bit for bit). A name refers to
-            `terms` first, then to the registry (`register_term`).
+            `terms` first, then to the registry (`register_term`, installed entry points). A
+            compiled term's parameters can be set with a mapping instead of the weight:
+            ``{"speed_limit": {"weight": 1.0, "args": [0.01, 14.0]}}`` (Hydra:
+            ``+reward.terms.speed_limit={weight:1.0,args:[0.01,14.0]}``).
         terms: Term objects used by name in `weights` without registering them; a term named
             like a registered one replaces it in this reward (e.g. a Python "collision").
 
@@ -244,7 +286,9 @@ class LinearReward:
         ('collision', 'offroad')
     """
 
-    def __init__(self, weights: Mapping[str, float] | None = None, terms: Sequence[Term] = ()) -> None:
+    def __init__(
+        self, weights: Mapping[str, float | Mapping[str, Any]] | None = None, terms: Sequence[Term] = ()
+    ) -> None:
         local: dict[str, Term] = {}
         for t in terms:
             _check_term(t)
@@ -258,15 +302,13 @@ class LinearReward:
                 f"reward weights: expected a non-empty mapping of term name -> weight, got {weights!r}"
             )
         columns = []
-        for name, weight in weights.items():
-            if name not in local and name not in _registry():
-                valid = list(dict.fromkeys([*local, *_registry()]))
+        for name, spec in weights.items():
+            term = local.get(name) or _lookup(name)
+            if term is None:
+                valid = list(dict.fromkeys([*local, *registered_terms()]))
                 raise ConfigError(f"reward term {name!r} is unknown; valid terms: {', '.join(valid)}")
-            if isinstance(weight, bool) or not isinstance(weight, (int, float, np.number)):
-                raise ConfigError(f"reward weight of {name!r}: expected a number, got {weight!r}")
-            if not math.isfinite(float(weight)):
-                raise ConfigError(f"reward weight of {name!r}: expected a finite number, got {weight!r}")
-            columns.append(TermColumn(str(name), local.get(name) or _registry()[name], float(weight)))
+            weight, term = _weight_and_args(name, spec, term)
+            columns.append(TermColumn(str(name), term, weight))
         self.columns: tuple[TermColumn, ...] = tuple(columns)
         _check_width(len(self.columns))
 
@@ -322,6 +364,30 @@ class LinearReward:
 
     def __repr__(self) -> str:
         return f"LinearReward({ {c.name: c.weight for c in self.columns} })"
+
+
+def _weight_and_args(name: str, spec: object, term: Term) -> tuple[float, Term]:
+    """The weight of a `weights` entry (a number, or {weight, args}) and the term with its args."""
+    weight = spec
+    if isinstance(spec, Mapping):
+        unknown = set(spec) - {"weight", "args"}
+        if unknown:
+            raise ConfigError(
+                f"reward term {name!r}: unknown keys {sorted(unknown)}; expected weight and args"
+            )
+        weight = spec.get("weight", 1.0)
+        if "args" in spec:
+            if not isinstance(term, KernelTerm):
+                raise ConfigError(f"reward term {name!r}: args are for compiled terms (KernelTerm) only")
+            args = spec["args"]
+            if isinstance(args, (str, bytes)) or not isinstance(args, Sequence):
+                raise ConfigError(f"reward term {name!r}: args must be a list of numbers, got {args!r}")
+            term = term.with_args(*args)
+    if isinstance(weight, bool) or not isinstance(weight, (int, float, np.number)):
+        raise ConfigError(f"reward weight of {name!r}: expected a number, got {weight!r}")
+    if not math.isfinite(float(weight)):
+        raise ConfigError(f"reward weight of {name!r}: expected a finite number, got {weight!r}")
+    return float(weight), term
 
 
 def describe_terms() -> list[tuple[str, str, str]]:

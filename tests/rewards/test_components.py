@@ -51,6 +51,9 @@ def cython_term(tmp_path_factory):
         yield module.speed_limit_term(COEF, LIMIT)
     finally:
         sys.path.remove(str(target))
+        from selfplaydrive.rewards import components
+
+        components._REGISTRY.pop("speed_limit", None)  # loaded from the entry point by a test
 
 
 @pytest.fixture(scope="module")
@@ -243,7 +246,6 @@ def test_abi_declarations_ship_with_the_package_and_agree():
 def test_numba_view_has_the_c_layout():
     pytest.importorskip("numba")
     from selfplaydrive._sim.reward import abi_sizes
-
     from selfplaydrive.rewards.numba_abi import struct_dtype
 
     sizes = abi_sizes()
@@ -268,3 +270,31 @@ def test_single_term_components_equal_the_fused_pass(road_map):
     # a weight other than 1 keeps the fused call
     weighted = LinearReward({**{n: 1.0 for n in TERM_NAMES}, "align": 3.0})
     assert weighted.plan()[0][0] == paper_group_address()
+
+
+def test_an_installed_term_is_found_by_name_with_args_from_hydra(road_map, cython_term):
+    """The Cython package declares an entry point (selfplaydrive.reward_terms): installed, its
+    term is named like a built-in one, from Python and from the Hydra reward group, and its
+    parameters come from the config."""
+    from selfplaydrive.rewards import registered_terms
+
+    assert "speed_limit" in registered_terms()
+    base = {n: 1.0 for n in TERM_NAMES}
+    _, want, _ = rollout(road_map, LinearReward({**base, "speed_limit": 1.0}, terms=[cython_term]))
+    _, got, _ = rollout(
+        road_map, LinearReward({**base, "speed_limit": {"weight": 1.0, "args": [COEF, LIMIT]}})
+    )
+    np.testing.assert_array_equal(got, want)
+    cfg = compose("sim", [f"+reward.terms.speed_limit={{weight:2.0,args:[{COEF},{LIMIT}]}}"])
+    env = build_env(cfg, maps=[road_map], num_worlds=1)
+    assert env.term_names[-1] == "speed_limit" and env.reward.columns[-1].term.args == (
+        pytest.approx(COEF),
+        pytest.approx(LIMIT),
+    )
+    assert env.reward.columns[-1].weight == 2.0
+    with pytest.raises(ConfigError, match="args are for compiled terms"):
+        LinearReward({"speed_limit": {"args": [1.0]}}, terms=[SpeedLimit()])
+    with pytest.raises(ConfigError, match="unknown keys"):
+        LinearReward({"collision": {"wieght": 1.0}})
+    with pytest.raises(ConfigError, match="args must be finite numbers"):
+        LinearReward({"speed_limit": {"args": ["fast"]}})
