@@ -46,4 +46,6 @@ directives = {
     "embedsignature": True,
 }
 
-setup(ext_modules=cythonize(extensions, compiler_directives=directives, include_path=["selfplaydrive/_sim", "selfplaydrive/include"]))
+# selfplaydrive/include: the component ABI (selfplaydrive_abi.h/.pxd), shipped for plug-ins
+include_path = ["selfplaydrive/_sim", "selfplaydrive/include"]
+setup(ext_modules=cythonize(extensions, compiler_directives=directives, include_path=include_path))
