@@ -1,66 +1,313 @@
-"""PPO training throughput: agent-steps/s of whole updates (collection + learning) and of
-collection alone, for any train config (docs/benchmarks.md, "Models and training").
+"""PPO training throughput: agent-steps/s of whole updates (collection + learning), of
+collection alone, per CPU-second, and the share of time per phase, for any train config;
+optionally alternated with an earlier build of the trainer and models in the same run
+(docs/benchmarks.md, "Trainer").
 
     python benchmarks/bench_train.py                                  # the main job's settings
-    python benchmarks/bench_train.py experiment=null                  # paper-size Deep Sets
-    python benchmarks/bench_train.py experiment=null model=transformer --updates 2
+    python benchmarks/bench_train.py '~experiment' trainer.torch_threads=1   # paper-size Deep Sets
+    python benchmarks/bench_train.py --baseline HEAD~1 --updates 6    # this tree vs HEAD~1
     python benchmarks/bench_train.py --json trainer.torch_threads=2 env.num_threads=2
 
-The first update is a warm-up and is not counted. Prints one line per update and a summary
-(JSON with --json): model, parameters, agent slots, torch threads, env threads, and the mean
-active agent-steps/s (overall and collection only) and slot-steps/s over the counted updates.
+Every build runs in its own worker process: one warm-up update (allocations, first reset), then
+one update per request. With `--baseline REV` the worker of the baseline imports
+`selfplaydrive/models` and `selfplaydrive/trainers/ppo` from `git archive REV` (everything else,
+the simulator included, is this tree's), and the two workers take turns update by update, the
+order flipping every round, so both see the same machine load. Reported per build: medians
+over the counted updates of active agent-steps/s (wall), agent-steps per CPU-second of the
+worker (`time.process_time`, all its threads), collection-only agent-steps/s, and the share
+of wall time in env.step, policy inference (the rest of collection), advantages (GAE) and the
+PPO epochs; with a baseline, the ratio of the medians and the median of the per-round ratios.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.abc
+import importlib.util
+import io
 import json
+import os
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
+from pathlib import Path
 
-import torch
+REPO = Path(__file__).resolve().parents[1]
+# The packages a baseline replaces; the rest of selfplaydrive (env, builder, configs) is shared.
+OVERLAID = ("selfplaydrive.models", "selfplaydrive.trainers.ppo")
+PHASES = ("env_step", "policy", "advantages", "update")
 
-from selfplaydrive.builder import build_env, build_model, compose
-from selfplaydrive.trainers.ppo.config import PPOConfig
-from selfplaydrive.trainers.ppo.trainer import PPOTrainer
+
+class _Overlay(importlib.abc.MetaPathFinder):
+    """Finds the `OVERLAID` packages (and their modules) under `root` instead of this tree."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+
+    def find_spec(self, name: str, path: object = None, target: object = None):
+        if not any(name == pkg or name.startswith(pkg + ".") for pkg in OVERLAID):
+            return None
+        location = self.root.joinpath(*name.split("."))
+        if location.is_dir():
+            init = location / "__init__.py"
+            return importlib.util.spec_from_file_location(
+                name, init, submodule_search_locations=[str(location)]
+            )
+        file = location.with_suffix(".py")
+        return importlib.util.spec_from_file_location(name, file) if file.exists() else None
 
 
-def measure(overrides: list[str], updates: int) -> dict[str, object]:
-    """Run `updates` + 1 PPO updates; returns the throughput summary."""
+def export_build(rev: str, dest: Path) -> None:
+    """Write the `OVERLAID` packages of git revision `rev` under `dest`."""
+    paths = [pkg.replace(".", "/") for pkg in OVERLAID]
+    tar = subprocess.run(
+        ["git", "-C", str(REPO), "archive", "--format=tar", rev, *paths], check=True, capture_output=True
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as archive:
+        archive.extractall(dest, filter="data")
+
+
+# ---------------------------------------------------------------------------------------------
+# worker: builds one trainer and answers "update" lines with one JSON line each
+
+
+def build_trainer(overrides: list[str]):
+    """The trainer `selfplaydrive train <overrides>` would build (seeded, no run folder)."""
+    from dataclasses import fields
+
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.builder import build_env, build_model, compose
+    from selfplaydrive.trainers.ppo.config import PPOConfig
+    from selfplaydrive.trainers.ppo.trainer import PPOTrainer
+    from selfplaydrive.trainers.run import seed_everything
+
     cfg = compose("train", overrides)
+    values = OmegaConf.to_container(cfg.trainer, resolve=True)
+    known = {f.name for f in fields(PPOConfig)}  # a baseline may predate some keys
+    values = {k: v for k, v in values.items() if k in known}
+    values.update(progress_bar=False, checkpoint_interval=0, total_steps=10**12)
+    config = PPOConfig(**values)
+    seed_everything(int(cfg.seed), config.torch_threads)
     env = build_env(cfg)
     model = build_model(cfg, env)
-    fields = {k: v for k, v in dict(cfg.trainer).items() if k != "_target_"}
-    fields.update(progress_bar=False, checkpoint_interval=0, total_steps=10**12)
-    trainer = PPOTrainer(env, model, PPOConfig.from_dict(fields), None)
-    trainer.train(num_updates=1)  # warm-up: allocations, first reset
-    steps = collect_time = total_time = 0.0
-    for _ in range(updates):
-        steps0 = trainer.agent_steps
+    return PPOTrainer(env, model, config, None), cfg
+
+
+def timed_env_step(env) -> list[float]:
+    """Wrap `env.step` so that its wall time adds up in the returned one-element list."""
+    total = [0.0]
+    step = env.step
+
+    def wrapper(actions):
         t0 = time.perf_counter()
-        trainer.collect()
-        trainer.compute_advantages()
-        t1 = time.perf_counter()
-        trainer.update()
-        trainer.update_idx += 1
-        t2 = time.perf_counter()
-        n = trainer.agent_steps - steps0
-        print(f"update: {n} agent-steps, collect {t1 - t0:.2f} s, learn {t2 - t1:.2f} s", flush=True)
-        steps += n
-        collect_time += t1 - t0
-        total_time += t2 - t0
+        step(actions)
+        total[0] += time.perf_counter() - t0
+
+    env.step = wrapper
+    return total
+
+
+def one_update(trainer, env_time: list[float]) -> dict[str, float]:
+    """Run one PPO update; its agent-steps, wall and CPU seconds per phase."""
+    steps0, env0 = trainer.agent_steps, env_time[0]
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    trainer.collect()
+    t1 = time.perf_counter()
+    trainer.compute_advantages()
+    t2 = time.perf_counter()
+    trainer.update()
+    trainer.update_idx += 1
+    t3, cpu1 = time.perf_counter(), time.process_time()
+    env_s = env_time[0] - env0
     return {
-        "model": type(model).__name__,
-        "parameters": sum(p.numel() for p in model.parameters()),
-        "obs_dim": env.layout.obs_dim,
-        "agent_slots": env.num_agents,
+        "agent_steps": trainer.agent_steps - steps0,
+        "wall_s": t3 - t0,
+        "cpu_s": cpu1 - cpu0,
+        "collect_s": t1 - t0,
+        "env_step": env_s,
+        "policy": t1 - t0 - env_s,
+        "advantages": t2 - t1,
+        "update": t3 - t2,
+    }
+
+
+def worker(overrides: list[str], overlay: str | None) -> None:
+    """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin."""
+    if overlay:
+        sys.meta_path.insert(0, _Overlay(Path(overlay)))
+    import torch
+
+    trainer, cfg = build_trainer(overrides)
+    env_time = timed_env_step(trainer.env)
+    trainer.train(num_updates=1)  # warm-up: allocations, first reset
+    info = {
+        "model": type(trainer.model).__name__,
+        "parameters": sum(p.numel() for p in trainer.model.parameters()),
+        "obs_dim": trainer.env.layout.obs_dim,
+        "agent_slots": trainer.env.num_agents,
         "rollout_length": trainer.config.rollout_length,
         "torch_threads": torch.get_num_threads(),
         "env_threads": int(cfg.env.num_threads),
-        "updates": updates,
-        "agent_steps_per_s": steps / total_time,
-        "collect_agent_steps_per_s": steps / collect_time,
-        "slot_steps_per_s": updates * trainer.slots_per_update / total_time,
+        "trainer_file": sys.modules[type(trainer).__module__].__file__,
     }
+    print(json.dumps(info), flush=True)
+    for line in sys.stdin:
+        if line.strip() != "update":
+            break
+        print(json.dumps(one_update(trainer, env_time)), flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# parent: starts the workers, alternates them, summarises
+
+
+class Worker:
+    """A worker process of one build (`overlay`: the baseline's exported tree, or None)."""
+
+    def __init__(
+        self, label: str, overrides: list[str], overlay: Path | None, env: dict[str, str] | None = None
+    ) -> None:
+        cmd = [sys.executable, __file__, "--worker", *(["--overlay", str(overlay)] if overlay else [])]
+        self.label = label
+        self.proc = subprocess.Popen(
+            [*cmd, "--", *overrides],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            cwd=REPO,
+            env={**os.environ, **(env or {})},
+        )
+        self.info = self._read()
+        self.updates: list[dict[str, float]] = []
+
+    def _read(self) -> dict[str, object]:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"{self.label} worker exited (rc {self.proc.wait()}); see its stderr above")
+        return json.loads(line)
+
+    def update(self) -> dict[str, float]:
+        self.proc.stdin.write("update\n")
+        self.proc.stdin.flush()
+        result = self._read()
+        self.updates.append(result)
+        print(
+            f"  {self.label}: {rate(result):,.0f} agent-steps/s "
+            f"({result['agent_steps']} in {result['wall_s']:.2f} s)",
+            flush=True,
+        )
+        return result
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def rate(u: dict[str, float]) -> float:
+    return u["agent_steps"] / u["wall_s"]
+
+
+def summarize(updates: list[dict[str, float]]) -> dict[str, float]:
+    """Medians over updates: agent-steps/s (wall, CPU, collection) and phase shares."""
+    med = statistics.median
+    out = {
+        "agent_steps_per_s": med(rate(u) for u in updates),
+        "agent_steps_per_cpu_s": med(u["agent_steps"] / u["cpu_s"] for u in updates),
+        "collect_agent_steps_per_s": med(u["agent_steps"] / u["collect_s"] for u in updates),
+        "wall_s_per_update": med(u["wall_s"] for u in updates),
+    }
+    for phase in PHASES:
+        out[f"share_{phase}"] = med(u[phase] / u["wall_s"] for u in updates)
+    return out
+
+
+def run(
+    overrides: list[str],
+    updates: int,
+    baseline: str | None,
+    baseline_overrides: list[str] = (),
+    baseline_env: dict[str, str] | None = None,
+) -> dict[str, object]:
+    """Alternate the workers for `updates` rounds; returns the summary.
+
+    A baseline worker runs when `baseline` (a git revision) or `baseline_overrides` /
+    `baseline_env` (extra Hydra overrides / environment variables of the baseline worker, to
+    compare settings of one build) are given; without a revision it runs this tree."""
+    load0 = os.getloadavg()
+    compare = bool(baseline or baseline_overrides or baseline_env)
+    with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
+        workers = [Worker("current", overrides, None)]
+        if baseline:
+            export_build(baseline, Path(tmp))
+        if compare:
+            label = " ".join(["baseline", baseline or "(this tree)", *baseline_overrides])
+            overlay = Path(tmp) if baseline else None
+            workers.append(Worker(label, [*overrides, *baseline_overrides], overlay, baseline_env))
+        try:
+            for i in range(updates):
+                for w in workers if i % 2 == 0 else workers[::-1]:
+                    w.update()
+        finally:
+            for w in workers:
+                w.close()
+    result: dict[str, object] = {
+        "overrides": overrides,
+        "updates": updates,
+        "load_avg_start": load0[0],
+        "load_avg_end": os.getloadavg()[0],
+        "cpu_count": os.cpu_count(),
+    }
+    for w in workers:
+        key = "current" if w.label == "current" else "baseline"
+        result[key] = {
+            **w.info,
+            "rev": w.label[len("baseline ") :] if key == "baseline" else "working tree",
+            "env": baseline_env if key == "baseline" else {},
+            **summarize(w.updates),
+        }
+    if compare:
+        cur, base = workers[0].updates, workers[1].updates
+        result["ratio_of_medians"] = (
+            result["current"]["agent_steps_per_s"] / result["baseline"]["agent_steps_per_s"]
+        )
+        result["median_round_ratio"] = statistics.median(
+            rate(a) / rate(b) for a, b in zip(cur, base, strict=True)
+        )
+        result["cpu_ratio_of_medians"] = (
+            result["current"]["agent_steps_per_cpu_s"] / result["baseline"]["agent_steps_per_cpu_s"]
+        )
+    return result
+
+
+def report(result: dict[str, object]) -> str:
+    """Human-readable lines of `run`'s result."""
+    lines = [
+        f"load average {result['load_avg_start']:.2f} -> {result['load_avg_end']:.2f} "
+        f"on {result['cpu_count']} CPUs"
+    ]
+    for key in ("current", "baseline"):
+        if key not in result:
+            continue
+        r = result[key]
+        build = " ".join([r["rev"], *(f"{k}={v}" for k, v in r.get("env", {}).items())])
+        shares = ", ".join(f"{p} {r[f'share_{p}']:.0%}" for p in PHASES)
+        lines.append(
+            f"{key} ({build}): {r['model']} ({r['parameters']:,} params, obs {r['obs_dim']}), "
+            f"{r['agent_slots']} slots, torch threads {r['torch_threads']}, env threads {r['env_threads']}: "
+            f"{r['agent_steps_per_s']:,.0f} agent-steps/s overall, "
+            f"{r['agent_steps_per_cpu_s']:,.0f} per CPU-s, "
+            f"{r['collect_agent_steps_per_s']:,.0f} collecting; time: {shares}"
+        )
+    if "ratio_of_medians" in result:
+        lines.append(
+            f"current / baseline: {result['ratio_of_medians']:.2f}x (median of per-round ratios "
+            f"{result['median_round_ratio']:.2f}x, per CPU-second {result['cpu_ratio_of_medians']:.2f}x)"
+        )
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -68,20 +315,36 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of the train config")
-    parser.add_argument("--updates", type=int, default=5, help="counted updates (after one warm-up)")
+    parser.add_argument(
+        "--updates", type=int, default=5, help="counted updates per build (after one warm-up)"
+    )
+    parser.add_argument(
+        "--baseline", metavar="REV", help="git revision to alternate with (its models and trainer)"
+    )
+    parser.add_argument(
+        "--baseline-overrides",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra overrides of the baseline",
+    )
+    parser.add_argument(
+        "--baseline-env",
+        nargs="*",
+        default=[],
+        metavar="NAME=VALUE",
+        help="environment of the baseline worker",
+    )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--overlay", help=argparse.SUPPRESS)
     args = parser.parse_args()
-    result = measure(args.overrides, args.updates)
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(
-            f"{result['model']} ({result['parameters']:,} params, obs {result['obs_dim']}), "
-            f"{result['agent_slots']} slots, torch threads {result['torch_threads']}, env threads "
-            f"{result['env_threads']}: {result['agent_steps_per_s']:,.0f} agent-steps/s overall, "
-            f"{result['collect_agent_steps_per_s']:,.0f} collecting; "
-            f"{result['slot_steps_per_s']:,.0f} slot-steps/s (padding and ended agents included)"
-        )
+    if args.worker:
+        worker(args.overrides, args.overlay)
+        return
+    env = dict(item.split("=", 1) for item in args.baseline_env)
+    result = run(args.overrides, args.updates, args.baseline, args.baseline_overrides, env)
+    print(json.dumps(result) if args.json else report(result))
 
 
 if __name__ == "__main__":

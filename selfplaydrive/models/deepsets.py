@@ -20,7 +20,7 @@ from selfplaydrive.models.common import (
     check_nvec,
     check_positive,
     compact_sets,
-    masked_max,
+    encode_max,
     middle_prior_bias,
     reset_state,
 )
@@ -120,8 +120,8 @@ class DeepSetsModel(nn.Module):
             objects, obj_valid = compact_sets(objects, obj_valid)
             road, road_valid = compact_sets(road, road_valid)
         ego = self.ego_encoder(parts["ego"])
-        obj = masked_max(self.object_encoder(objects), obj_valid)
-        rd = masked_max(self.road_encoder(road), road_valid)
+        obj = encode_max(self.object_encoder, objects, obj_valid, self.input_size)
+        rd = encode_max(self.road_encoder, road, road_valid, self.input_size)
         return self.shared(torch.cat([ego, obj, rd], dim=1))
 
     def forward(self, obs: Tensor, state: State, episode_start: Tensor) -> tuple[Tensor, Tensor, State]:
@@ -143,18 +143,24 @@ class DeepSetsModel(nn.Module):
         return self.actor(out), self.critic(out).squeeze(-1), (h.squeeze(0), c.squeeze(0))
 
     def forward_sequence(
-        self, obs: Tensor, state: State, episode_start: Tensor
+        self, obs: Tensor, state: State, episode_start: Tensor, active: Tensor | None = None
     ) -> tuple[Tensor, Tensor, State]:
         """Evaluate a rollout segment for PPO with truncated BPTT.
 
-        The encoder runs on all T*B observations at once; the LSTM runs over chunks between
-        the times at which some agent's episode starts, resetting those agents' state there.
-        The result equals T calls of `forward`.
+        The encoder runs on all T*B observations at once (only the `active` ones when given);
+        the LSTM runs over chunks between the times at which some agent's episode starts,
+        resetting those agents' state there. Without `active` the result equals T calls of
+        `forward`.
 
         Args:
             obs: (T, B, obs_dim).
             state: (h, c) at the start of the segment, each (B, lstm_size).
             episode_start: (T, B) bool.
+            active: Optional (T, B) bool, the entries whose outputs are used. The others are
+                not encoded (the LSTM sees a zero embedding there), so their outputs, and the
+                state after them, are meaningless. Exact for PPO, where such entries carry no
+                loss and an agent's next active entry starts its episode (state reset); with a
+                third of the slots acting this skips two thirds of the encoder's work.
 
         Returns:
             logits (T, B, sum(nvec)), values (T, B), state after the last step.
@@ -166,7 +172,7 @@ class DeepSetsModel(nn.Module):
             )
         t_len, b = obs.shape[:2]
         self._check_state(state, b)
-        x = self.encode(obs.reshape(t_len * b, -1)).reshape(t_len, b, -1)
+        x = self._encode_rows(obs.reshape(t_len * b, -1), active).reshape(t_len, b, -1)
         starts = episode_start.to(torch.bool)
         bounds = [0, *[t for t in torch.nonzero(starts[1:].any(dim=1)).flatten().add(1).tolist()], t_len]
         h, c = state
@@ -178,6 +184,21 @@ class DeepSetsModel(nn.Module):
             outs.append(out)
         out = torch.cat(outs, dim=0)
         return self.actor(out), self.critic(out).squeeze(-1), (h, c)
+
+    def _encode_rows(self, obs: Tensor, active: Tensor | None) -> Tensor:
+        """`encode` of the rows of (N, obs_dim) `obs` where `active` ((..., ) bool, N entries)
+        is set, zeros elsewhere; all rows when `active` is None."""
+        if active is None:
+            return self.encode(obs)
+        if active.numel() != obs.shape[0]:
+            raise ValueError(
+                f"active: expected {obs.shape[0]} entries like obs, got shape {tuple(active.shape)}"
+            )
+        rows = torch.nonzero(active.reshape(-1)).flatten()
+        x = obs.new_zeros(obs.shape[0], self.hidden_size)
+        if len(rows):
+            x = x.index_copy(0, rows, self.encode(obs.index_select(0, rows)))
+        return x
 
     def _check_state(self, state: State, batch: int) -> None:
         if len(state) != 2 or any(s.shape != (batch, self.lstm_size) for s in state):

@@ -218,11 +218,31 @@ class TransformerModel(nn.Module):
         return self.actor(z), self.critic(z).squeeze(-1), ()
 
     def forward_sequence(
-        self, obs: Tensor, state: State = (), episode_start: Tensor | None = None
+        self,
+        obs: Tensor,
+        state: State = (),
+        episode_start: Tensor | None = None,
+        active: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, State]:
-        """Evaluate (T, B, obs_dim) observations; returns (T, B, sum(nvec)), (T, B), ()."""
+        """Evaluate (T, B, obs_dim) observations; returns (T, B, sum(nvec)), (T, B), ().
+
+        `active` ((T, B) bool, optional): only those entries are evaluated; the others get
+        zero logits and values (PPO gives them no loss, `DeepSetsModel.forward_sequence`).
+        """
         if obs.dim() != 3:
             raise ValueError(f"obs: expected (T, B, obs_dim), got {tuple(obs.shape)}")
         t_len, b = obs.shape[:2]
-        logits, value, _ = self.forward(obs.reshape(t_len * b, -1))
+        flat = obs.reshape(t_len * b, -1)
+        if active is None:
+            logits, value, _ = self.forward(flat)
+            return logits.reshape(t_len, b, -1), value.reshape(t_len, b), ()
+        if active.shape != obs.shape[:2]:
+            raise ValueError(f"active: expected shape {tuple(obs.shape[:2])}, got {tuple(active.shape)}")
+        rows = torch.nonzero(active.reshape(-1)).flatten()
+        logits = flat.new_zeros(t_len * b, sum(self.nvec))
+        value = flat.new_zeros(t_len * b)
+        if len(rows):
+            part_logits, part_value, _ = self.forward(flat.index_select(0, rows))
+            logits = logits.index_copy(0, rows, part_logits)
+            value = value.index_copy(0, rows, part_value)
         return logits.reshape(t_len, b, -1), value.reshape(t_len, b), ()

@@ -71,9 +71,11 @@ class SequenceEvaluator(nn.Module):
         self.model = model
 
     def forward(
-        self, obs: Tensor, state: tuple[Tensor, ...], episode_start: Tensor
+        self, obs: Tensor, state: tuple[Tensor, ...], episode_start: Tensor, active: Tensor | None = None
     ) -> tuple[Tensor, Tensor, tuple[Tensor, ...]]:
-        return self.model.forward_sequence(obs, state, episode_start)
+        if active is None:  # also for models whose forward_sequence has no `active`
+            return self.model.forward_sequence(obs, state, episode_start)
+        return self.model.forward_sequence(obs, state, episode_start, active=active)
 
 
 def wrap(model: nn.Module, info: DistInfo, device: torch.device) -> nn.Module:

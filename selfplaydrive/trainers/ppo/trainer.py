@@ -8,7 +8,10 @@ Layout of the file, CleanRL style: setup, ROLLOUT, ADVANTAGES, UPDATE, bookkeepi
 
 from __future__ import annotations
 
+import inspect
+import os
 import time
+import warnings
 from collections import deque
 from collections.abc import Mapping
 from contextlib import nullcontext
@@ -43,6 +46,27 @@ def resolve_device(name: str, info: DistInfo) -> torch.device:
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise RuntimeError(f"PPOConfig.device = {name!r}, but torch sees no CUDA device")
     return torch.device(name)
+
+
+def warn_spinning_threads(device: torch.device) -> None:
+    """Warn when several torch CPU threads will spin-wait beside the simulator's.
+
+    The simulator sets `GOMP_SPINCOUNT=20000` (selfplaydrive/_sim) unless `OMP_WAIT_POLICY` is
+    set, and torch's OpenMP threads inherit it: idle workers spin about 0.5 ms before sleeping.
+    On a loaded 2-core machine, 2 torch threads then trained 37x slower than with
+    `OMP_WAIT_POLICY=passive` (159 vs 5,978 agent-steps/s, docs/benchmarks.md, "Trainer"). The
+    policy is read when OpenMP loads, before any trainer code runs, so it cannot be changed here.
+    """
+    if device.type != "cpu" or torch.get_num_threads() < 2 or "OMP_WAIT_POLICY" in os.environ:
+        return
+    if os.environ.get("GOMP_SPINCOUNT", "0") not in ("", "0"):
+        warnings.warn(
+            f"{torch.get_num_threads()} torch threads spin-wait (GOMP_SPINCOUNT="
+            f"{os.environ['GOMP_SPINCOUNT']}): on a busy machine training can be many times slower; "
+            "start the process with OMP_WAIT_POLICY=passive, or use trainer.torch_threads=1",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 # The progress bar and the `recent/*` scalars summarise a sliding window of the last finished
@@ -85,11 +109,19 @@ class PPOTrainer:
         self.device = resolve_device(config.device, self.dist)
         if config.torch_threads:
             torch.set_num_threads(config.torch_threads)
+        warn_spinning_threads(self.device)
         if config.deterministic:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
         self.evaluator = wrap(self.model, self.dist, self.device)
-        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate, eps=config.adam_eps)
+        # models whose forward_sequence takes `active` skip the entries that carry no loss
+        self.skip_inactive = "active" in inspect.signature(model.forward_sequence).parameters
+        # the fused kernel: one op per step instead of a dozen per parameter (0.5 -> 0.14 ms a
+        # step for the laptop model on the CPU, the same update up to float rounding)
+        fused = self.device.type in ("cpu", "cuda")
+        self.optimizer = torch.optim.Adam(
+            model.parameters(), lr=config.learning_rate, eps=config.adam_eps, fused=fused
+        )
         self.amp_dtype = self._amp_dtype()
         seed = config.seed + self.dist.rank
         self.sample_gen = torch.Generator(device=self.device).manual_seed(seed)
@@ -152,22 +184,39 @@ class PPOTrainer:
 
     # ---------------------------------------------------------------------------------------
     # ROLLOUT: act in every slot of every world, straight from the env's buffers
-    @torch.no_grad()
+    @torch.inference_mode()
     def act(self, deterministic: bool = False) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
         """Policy step on the current observations; advances the recurrent state.
+
+        Only the slots that act (`env.masks`) are evaluated: with a third of the slots acting
+        (experiment=laptop) the others would cost two thirds of the inference for outputs that
+        nothing reads. Their actions are 0 (the env ignores them), their log-probs and values 0,
+        and their recurrent state is left as it is (an agent's next acting step is an episode
+        start, which resets it).
 
         Returns:
             obs (N, obs_dim), actions (N, A), log-probs (N,), values (N,), acted mask (N,).
         """
         obs = self._to_device(self.env.observations, "obs")
-        with self.autocast():
-            logits, value, self.state = self.model(obs, self.state, self.next_start)
-        logits = logits.float()
-        actions = sample_actions(logits, self.nvec, deterministic, generator=self.sample_gen)
         acted = self._to_device(self.env.masks, "acted")
-        return obs, actions, log_prob(logits, actions, self.nvec), value.float(), acted
+        actions = torch.zeros(self.num_slots, len(self.nvec), dtype=torch.int64, device=self.device)
+        logprobs = torch.zeros(self.num_slots, device=self.device)
+        values = torch.zeros(self.num_slots, device=self.device)
+        rows = torch.nonzero(acted).flatten()
+        if len(rows):
+            state = _index(self.state, rows)
+            with self.autocast():
+                logits, value, state = self.model(obs[rows], state, self.next_start[rows])
+            logits = logits.float()
+            sampled = sample_actions(logits, self.nvec, deterministic, generator=self.sample_gen)
+            actions[rows] = sampled
+            logprobs[rows] = log_prob(logits, sampled, self.nvec)
+            values[rows] = value.float()
+            for full, part in zip(self.state, state, strict=True):
+                full[rows] = part.to(full.dtype)
+        return obs, actions, logprobs, values, acted
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def env_step(self, actions: Tensor, acted: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Step the env with `actions`; returns rewards, terminated, truncated (masked by `acted`)
         and V(final observation) of the truncated slots (0 elsewhere)."""
@@ -210,7 +259,7 @@ class PPOTrainer:
 
     # ---------------------------------------------------------------------------------------
     # ADVANTAGES: GAE with V(final obs) at truncations, 0 at terminations, nothing across slots
-    @torch.no_grad()
+    @torch.inference_mode()
     def compute_advantages(self) -> None:
         s, cfg = self.storage, self.config
         obs = self._to_device(self.env.observations, "obs")
@@ -234,7 +283,8 @@ class PPOTrainer:
         """Total loss of the agent slots `slots` and its parts."""
         cfg, mb = self.config, self.storage.minibatch(slots)
         with self.autocast():
-            logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"])
+            active = mb["active"] if self.skip_inactive else None
+            logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"], active)
         logits, values, mask = logits.float(), values.float(), mb["active"]
         new_logprob = log_prob(logits, mb["actions"], self.nvec)
         adv = normalize_advantages(mb["advantages"], mask) if cfg.norm_adv else mb["advantages"]
@@ -250,12 +300,13 @@ class PPOTrainer:
         if cfg.anneal_lr:
             frac = 1.0 - self.update_idx / self.total_updates
             self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
-        size = -(-self.num_slots // cfg.num_minibatches)
+        live = self._live_slots()
+        size = -(-len(live) // cfg.num_minibatches)
         sums: dict[str, float] = {}
         count = 0
         for _epoch in range(cfg.num_epochs):
-            order = torch.randperm(self.num_slots, generator=self.shuffle_gen).to(self.device)
-            for start in range(0, self.num_slots, size):
+            order = live[torch.randperm(len(live), generator=self.shuffle_gen).to(self.device)]
+            for start in range(0, len(live), size):
                 loss, info = self.minibatch_loss(order[start : start + size])
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
@@ -272,6 +323,16 @@ class PPOTrainer:
         out["losses/explained_variance"] = self._explained_variance()
         out["charts/learning_rate"] = self.optimizer.param_groups[0]["lr"]
         return out
+
+    def _live_slots(self) -> Tensor:
+        """The agent slots that acted at some step of the rollout, (K,) int64 on the device.
+
+        The others carry no loss, so the minibatches are cut from these alone: with
+        experiment=laptop, where every contact ends an agent until its world resets, about half
+        the slots stay empty for a whole rollout, and their BPTT would be half an update's work.
+        (Every slot is kept when none acted, so that an update still takes its optimizer steps.)"""
+        live = torch.nonzero(self.storage.active.any(dim=0)).flatten()
+        return live if len(live) else torch.arange(self.num_slots, device=self.device)
 
     def _explained_variance(self) -> float:
         s = self.storage

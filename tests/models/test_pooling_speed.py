@@ -1,0 +1,151 @@
+"""The throughput paths of the models (issue #16): `encode_max` (max found without autograd,
+winners re-encoded) and `forward_sequence(..., active=...)` give the values and gradients of
+the plain computation."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import nn
+
+from selfplaydrive.models import DeepSetsModel, TransformerModel
+from selfplaydrive.models.common import encode_max, few_winners, masked_max
+from selfplaydrive.sim.layout import ObsLayout
+
+LAYOUT = ObsLayout(max_objects=6, max_road=40)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def encoder(in_dim: int, width: int, seed: int) -> nn.Sequential:
+    torch.manual_seed(seed)
+    return nn.Sequential(nn.Linear(in_dim, width), nn.LayerNorm(width), nn.GELU(), nn.Linear(width, width))
+
+
+def sets(
+    batch: int, n: int, features: int, seed: int, fill: float = 0.7
+) -> tuple[torch.Tensor, torch.Tensor]:
+    gen = torch.Generator().manual_seed(seed)
+    x = torch.rand(batch, n, features, generator=gen) * 2 - 1
+    valid = torch.rand(batch, n, generator=gen) < fill
+    valid[0] = False  # a row without any element
+    valid[1] = True  # a full row
+    return x, valid
+
+
+def grads(module: nn.Module, out: torch.Tensor, weight: torch.Tensor) -> list[torch.Tensor]:
+    module.zero_grad()
+    (out * weight).sum().backward()
+    return [p.grad.clone() for p in module.parameters()]
+
+
+@pytest.mark.parametrize(("n", "width"), [(40, 8), (5, 16)])
+def test_encode_max_matches_masked_max_values_and_gradients(n: int, width: int) -> None:
+    enc = encoder(3, width, seed=0)
+    x, valid = sets(12, n, 3, seed=1)
+    weight = torch.randn(12, width, generator=torch.Generator().manual_seed(2))
+    plain = masked_max(enc(x), valid)
+    fast = encode_max(enc, x, valid, width)
+    torch.testing.assert_close(fast, plain, atol=1e-6, rtol=1e-6)
+    assert torch.equal(fast[0], torch.zeros(width))  # the empty row
+    for a, b in zip(grads(enc, fast, weight), grads(enc, plain, weight), strict=True):
+        torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
+
+
+def test_encode_max_without_autograd_matches_and_keeps_no_graph() -> None:
+    enc = encoder(3, 8, seed=3)
+    x, valid = sets(600, 40, 3, seed=4)  # several chunks of the gradient-free pass
+    with torch.no_grad():
+        plain = masked_max(enc(x), valid)
+    with torch.inference_mode():
+        fast = encode_max(enc, x, valid, 8)
+    assert not fast.requires_grad
+    torch.testing.assert_close(fast, plain, atol=1e-6, rtol=1e-6)
+
+
+def test_encode_max_ignores_padding_values() -> None:
+    enc = encoder(3, 8, seed=5)
+    x, valid = sets(10, 40, 3, seed=6, fill=0.3)
+    noisy = torch.where(valid.unsqueeze(-1), x, torch.full_like(x, 50.0))  # huge padding
+    torch.testing.assert_close(encode_max(enc, noisy, valid, 8), encode_max(enc, x, valid, 8))
+
+
+def test_masked_max_gradient_goes_to_the_winner_only() -> None:
+    x = torch.tensor([[[1.0, 4.0], [3.0, 2.0], [9.0, 9.0]]], requires_grad=True)
+    valid = torch.tensor([[True, True, False]])  # the 9s are padding
+    out = masked_max(x, valid)
+    assert out.tolist() == [[3.0, 4.0]]
+    out.sum().backward()
+    assert x.grad.tolist() == [[[0.0, 1.0], [1.0, 0.0], [0.0, 0.0]]]
+
+
+def test_few_winners_decides_by_the_expected_winner_count() -> None:
+    assert few_winners(64, 32) and few_winners(200, 64)  # road sets of the laptop and paper models
+    assert not few_winners(16, 32)  # laptop objects: nearly every element wins some dimension
+    assert not few_winners(1, 64)
+
+
+def make_obs(batch: int, seed: int) -> torch.Tensor:
+    gen = torch.Generator().manual_seed(seed)
+    obs = torch.rand(batch, LAYOUT.obs_dim, generator=gen) * 2 - 1
+    for lo, hi, width, col in (
+        (
+            LAYOUT.objects_offset,
+            LAYOUT.road_offset,
+            LAYOUT.object_dim,
+            LAYOUT.feature_index("object", "valid"),
+        ),
+        (LAYOUT.road_offset, LAYOUT.extra_offset, LAYOUT.road_dim, LAYOUT.feature_index("road", "valid")),
+    ):
+        block = obs[:, lo:hi].view(batch, -1, width)
+        valid = torch.rand(block.shape[:2], generator=gen) < 0.8
+        block[..., col] = valid.float()
+        block[~valid] = 0.0
+    return obs
+
+
+@pytest.mark.parametrize("cls", [DeepSetsModel, TransformerModel])
+def test_active_entries_match_the_full_evaluation(cls: type) -> None:
+    """PPO's case: entries that do not act carry no loss, and an agent's next acting entry
+    starts its episode, so skipping them changes neither outputs nor gradients."""
+    torch.manual_seed(0)
+    model = cls(LAYOUT)
+    t_len, batch = 6, 5
+    obs = make_obs(t_len * batch, seed=1).view(t_len, batch, -1)
+    active = torch.ones(t_len, batch, dtype=torch.bool)
+    active[2:, 0] = False  # slot 0 ends after step 1
+    active[:3, 3] = False  # slot 3 is empty until its agent starts at step 3
+    active[:, 4] = False  # slot 4 never acts
+    starts = torch.zeros(t_len, batch, dtype=torch.bool)
+    starts[3, 3] = True
+    state = tuple(torch.randn_like(s) for s in model.initial_state(batch))
+    weight = torch.randn(t_len, batch)
+
+    def run(**kwargs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, list[torch.Tensor]]:
+        model.zero_grad()
+        logits, values, _ = model.forward_sequence(obs, state, starts, **kwargs)
+        loss = ((logits.sum(-1) + values) * weight * active).sum()
+        loss.backward()
+        return logits, values, [p.grad.clone() for p in model.parameters() if p.grad is not None]
+
+    full_logits, full_values, full_grads = run()
+    logits, values, part_grads = run(active=active)
+    torch.testing.assert_close(logits[active], full_logits[active], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(values[active], full_values[active], atol=1e-5, rtol=1e-5)
+    assert len(part_grads) == len(full_grads)
+    for a, b in zip(part_grads, full_grads, strict=True):
+        torch.testing.assert_close(a, b, atol=1e-4, rtol=1e-4)
+
+
+def test_active_mask_of_the_wrong_shape_is_refused() -> None:
+    model = DeepSetsModel(LAYOUT)
+    obs = make_obs(6, seed=2).view(3, 2, -1)
+    starts = torch.zeros(3, 2, dtype=torch.bool)
+    with pytest.raises(ValueError, match="active"):
+        model.forward_sequence(obs, model.initial_state(2), starts, active=torch.ones(4, dtype=torch.bool))
