@@ -298,3 +298,16 @@ def test_an_installed_term_is_found_by_name_with_args_from_hydra(road_map, cytho
         LinearReward({"collision": {"wieght": 1.0}})
     with pytest.raises(ConfigError, match="args must be finite numbers"):
         LinearReward({"speed_limit": {"args": ["fast"]}})
+
+
+def test_compare_terms_checks_a_port_and_names_the_first_difference(road_map, numba_term):
+    from selfplaydrive.testing.terms import compare_terms
+
+    assert compare_terms(SpeedLimit(), numba_term, road_map, steps=30) <= 1e-6
+
+    class Off(SpeedLimit):
+        def __call__(self, state):
+            return super().__call__(state) * np.float32(1.01)
+
+    with pytest.raises(AssertionError, match=r"'speed_limit': step \d+, agent slot \d+: reference"):
+        compare_terms(SpeedLimit(), Off(), road_map, steps=30)
