@@ -185,6 +185,11 @@ class VecEnv:
         self.reward_terms = b["terms"]
         # Python-term columns (filled after the kernels): hooks are the last ones
         self._python_columns = [k for k, c in enumerate(self.reward.columns) if not c.native]
+        # user-compiled terms run unchecked inside the step: their output is checked after it
+        # (one isfinite over the N rewards); the library's own terms need no check
+        self._check_compiled = any(
+            isinstance(c.term, KernelTerm) and c.term.form != "builtin" for c in self.reward.columns
+        )
         self.extra_terms = b["terms"][:, b["terms"].shape[1] - len(self.reward_hooks) :]
         self.terminations = b["term"].view(bool)
         self.truncations = b["trunc"].view(bool)
@@ -254,6 +259,8 @@ class VecEnv:
             t = self.action_table
             self._step_external_physics(self.buffers["act_i" if t.discrete else "act_f"])
         self._world.step(self.num_threads, self.profile)
+        if self._check_compiled and not np.isfinite(self.rewards).all():
+            self._report_compiled_terms()
         if self._python_columns:
             self._run_python_terms()
         if self.obs_hooks:
@@ -300,6 +307,18 @@ class VecEnv:
             pack(self.buffers, self.dims, int(w), sc, self.params.dt, key)
         self._world.after_reset(worlds, self.num_threads)
         self._world.timings["reset"] += time.perf_counter() - t0
+
+    def _report_compiled_terms(self) -> None:
+        """Raise naming the compiled term that wrote a non-finite value (section 2.3 columns)."""
+        bad = ~np.isfinite(self.reward_terms)
+        k = int(np.flatnonzero(bad.any(axis=0))[0])
+        i = int(np.flatnonzero(bad[:, k])[0])
+        col = self.reward.columns[k]
+        form = col.term.form if isinstance(col.term, KernelTerm) else "python"
+        raise ValueError(
+            f"reward term {col.name!r} ({form}): wrote {self.reward_terms[i, k]} for agent slot {i} "
+            f"({int(bad[:, k].sum())} non-finite values this step)"
+        )
 
     def _run_python_terms(self) -> None:
         """Columns of the Python reward terms, after the kernels (which zeroed them): weighted,

@@ -311,3 +311,25 @@ def test_compare_terms_checks_a_port_and_names_the_first_difference(road_map, nu
 
     with pytest.raises(AssertionError, match=r"'speed_limit': step \d+, agent slot \d+: reference"):
         compare_terms(SpeedLimit(), Off(), road_map, steps=30)
+
+
+def test_a_compiled_term_writing_nan_is_reported_by_name(road_map):
+    numba = pytest.importorskip("numba")
+    from selfplaydrive.rewards.numba_abi import SIGNATURE, SIM, int_field, u8_ptr
+
+    @numba.cfunc(SIGNATURE)
+    def broken(sim, prm, atlas, args, w, out, stride):  # pragma: no cover - compiled
+        A = int_field(sim, SIM.A)
+        active = u8_ptr(sim, SIM.active)
+        for a in range(A):
+            if active[w * A + a]:
+                out[a * stride] = np.float32(np.nan)
+
+    term = KernelTerm.from_numba("broken", broken)
+    env = VecEnv(
+        road_map, PaperSpawner(), 1, reward=LinearReward({"collision": 1.0, "broken": 1.0}, terms=[term])
+    )
+    env.reset(0)
+    with pytest.raises(ValueError, match=r"reward term 'broken' \(numba\): wrote nan for agent slot"):
+        env.step(np.zeros((env.num_agents, 2), np.int64))
+    assert not VecEnv(road_map, PaperSpawner(), 1)._check_compiled  # the paper's terms: no check
