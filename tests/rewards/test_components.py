@@ -176,6 +176,9 @@ def test_unknown_names_and_bad_weights_are_config_errors():
     with pytest.raises(ConfigError, match="LinearReward"):
         VecEnv(load_map("default"), PaperSpawner(), 1, reward=["collision"])
     assert registered_terms()[:8] == TERM_NAMES
+    from selfplaydrive.rewards import describe_terms
+
+    assert describe_terms()[1][:2] == ("collision", "builtin") and "C_collision" in describe_terms()[1][2]
 
 
 def test_wrong_signatures_are_refused():
@@ -241,6 +244,9 @@ def test_abi_declarations_ship_with_the_package_and_agree():
         assert c_fields == pxd_fields, struct
     for name in re.findall(r"\bSD_([A-Z_0-9]+) = ", header):
         assert f'{name} "SD_{name}"' in pxd
+    from selfplaydrive.rewards import ABI_VERSION
+
+    assert re.search(r"#define SELFPLAYDRIVE_ABI_VERSION (\d+)", header).group(1) == str(ABI_VERSION)
 
 
 def test_numba_view_has_the_c_layout():
@@ -333,3 +339,25 @@ def test_a_compiled_term_writing_nan_is_reported_by_name(road_map):
     with pytest.raises(ValueError, match=r"reward term 'broken' \(numba\): wrote nan for agent slot"):
         env.step(np.zeros((env.num_agents, 2), np.int64))
     assert not VecEnv(road_map, PaperSpawner(), 1)._check_compiled  # the paper's terms: no check
+
+
+def test_register_term_makes_a_name_selectable():
+    from selfplaydrive.rewards import components, register_term
+
+    class Zero:
+        name = "zero_term_for_test"
+
+        def __call__(self, state):
+            return np.zeros_like(state.speed)
+
+    try:
+        register_term(Zero())
+        assert "zero_term_for_test" in registered_terms()
+        assert LinearReward({"collision": 1.0, "zero_term_for_test": 1.0}).names[-1] == "zero_term_for_test"
+        with pytest.raises(ConfigError, match="already registered"):
+            register_term(Zero())
+        register_term(Zero(), replace=True)
+    finally:
+        components._REGISTRY.pop("zero_term_for_test", None)
+    with pytest.raises(ConfigError, match="is not registered"):
+        get_term("zero_term_for_test")
