@@ -28,7 +28,7 @@ extensions = [
     Extension(
         path[:-4].replace(os.sep, "."),
         [path],
-        include_dirs=[np.get_include(), "selfplaydrive/_sim"],
+        include_dirs=[np.get_include(), "selfplaydrive/_sim", "selfplaydrive/include"],
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_22_API_VERSION")],
         extra_compile_args=compile_args,
         extra_link_args=link_args,
@@ -46,4 +46,6 @@ directives = {
     "embedsignature": True,
 }
 
-setup(ext_modules=cythonize(extensions, compiler_directives=directives, include_path=["selfplaydrive/_sim"]))
+# selfplaydrive/include: the component ABI (selfplaydrive_abi.h/.pxd), shipped for plug-ins
+include_path = ["selfplaydrive/_sim", "selfplaydrive/include"]
+setup(ext_modules=cythonize(extensions, compiler_directives=directives, include_path=include_path))

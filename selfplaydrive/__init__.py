@@ -7,9 +7,19 @@ the gymnasium ids ``selfplaydrive/SingleAgent-v0`` and ``selfplaydrive/SelfPlay-
 
 __version__ = "0.1.0"
 
+import os
+
 from selfplaydrive.builder import make_env
 from selfplaydrive.env.registration import register_envs
 
 register_envs()
 
-__all__ = ["__version__", "make_env"]
+
+def get_include() -> str:
+    """Folder of the component ABI's declarations (selfplaydrive_abi.h for C,
+    selfplaydrive_abi.pxd for Cython), like `numpy.get_include()`: put it on the include path
+    of an extension that implements a component (docs/components.md)."""
+    return os.path.join(os.path.dirname(os.path.abspath(__file__)), "include")
+
+
+__all__ = ["__version__", "get_include", "make_env"]

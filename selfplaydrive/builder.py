@@ -142,11 +142,23 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         "physics": lambda: instantiate(cfg.physics.model),
         "obs": lambda: instantiate(cfg.obs),
     }
+    if "terms" in cfg.get("reward", {}) and cfg.reward.terms is not None:
+        parts["reward"] = lambda: _linear_reward(cfg.reward.terms)
     kwargs = {k: make() for k, make in parts.items() if k not in overrides}
     kwargs.update(overrides)
     # objects are passed to the partial, not to instantiate: Hydra would turn a dataclass such
     # as RoadMap into a structured config
     return instantiate(cfg.env, _partial_=True)(**kwargs)
+
+
+def _linear_reward(terms: Any) -> Any:
+    """The env's `LinearReward` from the ``reward.terms`` mapping (term name -> weight)."""
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.rewards.components import LinearReward
+
+    weights: Any = OmegaConf.to_container(terms, resolve=True) if OmegaConf.is_config(terms) else terms
+    return LinearReward(weights)  # it checks the mapping and names the bad key
 
 
 def make_env(
@@ -167,7 +179,8 @@ def make_env(
             (default: `PaperSpawner` with `reward` as its conditioning sampler).
         physics: A physics model (default `FrictionBicycleModel()`).
         reward: A conditioning sampler for the reward coefficients (default: the paper's
-            training distributions); ignored when `spawner` is given.
+            training distributions; ignored when `spawner` is given), or a
+            `selfplaydrive.rewards.LinearReward` selecting the env's reward terms.
         obs: An `ObsConfig` (default: 63 objects, 200 road segments within 100 m).
         num_worlds: Worlds stepped together.
         seed: Seed of the first reset.
@@ -186,6 +199,10 @@ def make_env(
 
     items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
+    from selfplaydrive.rewards.components import LinearReward
+
+    if isinstance(reward, LinearReward):  # the terms, not the coefficients' sampler
+        env_kwargs["reward"], reward = reward, None
     if spawner is None:
         spawner = PaperSpawner(conditioning=reward) if reward is not None else PaperSpawner()
     return VecEnv(maps, spawner, num_worlds, physics=physics, obs=obs, seed=seed, **env_kwargs)

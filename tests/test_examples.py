@@ -20,7 +20,13 @@ TERMS = ("waypoint", "collision", "offroad", "red_light", "comfort", "center", "
 
 def run_example(name: str, tmp_path: Path, via_env: bool = False, timeout: float = 240) -> str:
     """Run examples/<name> in its tiny setting (--tiny, or the environment variable)."""
+    import selfplaydrive
+
     env = dict(os.environ)
+    # the examples run against the selfplaydrive under test (a source tree first on sys.path
+    # here may differ from the installed one)
+    root = str(Path(selfplaydrive.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
     args = [sys.executable, str(EXAMPLES / name)]
     if via_env:
         env["SELFPLAYDRIVE_EXAMPLE_TINY"] = "1"
@@ -165,3 +171,14 @@ def test_05_ablation_runs_and_reads_the_logs(tmp_path):
     assert set(rows) >= {f"term/{t}" for t in TERMS} | {"charts/collision_rate"}
     assert all(len(v) == 2 for v in rows.values())
     assert float(rows["term/offroad"][0]) <= 0.0 and 0.0 <= float(rows["charts/collision_rate"][1]) <= 1.0
+
+
+# --- 06-08: one reward term, three forms ---------------------------------------------------
+@pytest.mark.parametrize("name", ["06_term_python.py", "07_term_numba.py", "08_term_cython.py"])
+def test_06_08_speed_limit_term_runs(name, tmp_path):
+    if name == "07_term_numba.py":
+        pytest.importorskip("numba")
+    out = run_example(name, tmp_path)
+    assert "reward columns of" in out and "  speed_limit " in out
+    for term in TERMS:
+        assert f"  {term} " in out, term

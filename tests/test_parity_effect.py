@@ -158,9 +158,12 @@ def _actions(env, rng):
 
 def kernel_view(env) -> dict[str, str]:
     """Digests of everything the kernels read: dims, kernel parameters (action tables
-    included), the map atlas, every buffer after the reset and after `STEPS` random steps."""
+    included), the reward terms and weights, the map atlas, every buffer after the reset and
+    after `STEPS` random steps."""
     view = {f"dims.{k}": repr(v) for k, v in vars(env.dims).items()}
     view.update({f"param.{k}": _digest(v) for k, v in env._kernel_params().items()})
+    # the reward stage's component table (World's `terms` argument): addresses and weights
+    view.update({f"reward.{c.name}": repr((c.term, c.weight)) for c in env.reward.columns})
     view.update({f"atlas.{k}": _digest(v) for k, v in env.atlas.items()})
     env.reset()
     view.update({f"reset.{k}": _digest(v) for k, v in env.buffers.items()})

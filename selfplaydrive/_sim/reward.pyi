@@ -1,2 +1,13 @@
-"""Type stub of the Cython module `selfplaydrive._sim.reward`: its kernels are cdef only, so
-Python sees no names."""
+"""Type stub of the Cython module `selfplaydrive._sim.reward`: the reward stage's kernels are
+cdef only; Python sees the addresses of the paper's reward components (section 2.3) and the
+ABI's sizes."""
+
+from typing import Any
+
+PAPER_TERMS: tuple[str, ...]
+__pyx_capi__: dict[str, Any]
+
+def paper_term_addresses() -> dict[str, int]: ...
+def paper_group_address() -> int: ...
+def abi_sizes() -> dict[str, int]: ...
+def max_terms() -> int: ...

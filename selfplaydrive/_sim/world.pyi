@@ -10,7 +10,12 @@ STAGES: tuple[str, ...]
 class World:
     timings: dict[str, float]
     def __init__(
-        self, dims: dict[str, Any], state: dict[str, Any], atlas: dict[str, Any], params: dict[str, Any]
+        self,
+        dims: dict[str, Any],
+        state: dict[str, Any],
+        atlas: dict[str, Any],
+        params: dict[str, Any],
+        terms: list[tuple[int, NDArray[np.float32] | None, float, int]],
     ) -> None: ...
     def step(self, num_threads: int = 1, profile: bool = False, chunk: int = 0) -> None: ...
     def after_reset(self, worlds: NDArray[Any], num_threads: int = 1) -> None: ...

@@ -9,12 +9,12 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange
-from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t
-from selfplaydrive._sim.common cimport Sim, Params, Atlas
+from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t, uintptr_t
+from selfplaydrive._sim.common cimport Sim, Params, Atlas, MAX_TERMS, reward_term_fn
 from selfplaydrive._sim.physics cimport physics_world
 from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world
 from selfplaydrive._sim.road cimport road_world
-from selfplaydrive._sim.reward cimport reward_world, finalize_world
+from selfplaydrive._sim.reward cimport TermSlot, reward_world, finalize_world
 from selfplaydrive._sim.observe cimport observe_world
 
 cnp.import_array()
@@ -34,13 +34,14 @@ cdef void* ptr(dict arrays, str name, object dtype, list keep) except NULL:
     return cnp.PyArray_DATA(a)
 
 
-cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
+cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, const TermSlot* slots,
+                   int w) noexcept nogil:
     """The whole chain for world `w` (section 2): physics, events, reward, observation."""
     physics_world(sim, prm, w)
     lights_peds_world(sim, prm, w)
     collisions_world(sim, prm, w)
     road_world(sim, atlas, prm, w)
-    reward_world(sim, prm, w)
+    reward_world(sim, atlas, prm, slots, w)
     observe_world(sim, atlas, prm, w)
     finalize_world(sim, prm, w)
 
@@ -69,15 +70,21 @@ cdef class World:
         state: Buffers named as the `Sim` fields (sim/buffers.py allocates them).
         atlas: Concatenated map arrays named as the `Atlas` fields (sim/atlas.py).
         params: Scalars named as the `Params` fields plus accel_table, steer_table, coeff_scale.
+        terms: One (address, args, weight, native) per column of the `terms` buffer, in column
+            order: the address of an `sd_reward_term_fn` (selfplaydrive_abi.h) or 0 for no call
+            (a Python column, or one a group written earlier fills), its float32 parameters
+            (or None), its weight, and 1 when the step fills it (0: Python, after the step).
+            rewards/components.py `LinearReward.plan` makes them and checks the addresses.
     """
 
     cdef Sim sim
     cdef Atlas atlas
     cdef Params prm
+    cdef TermSlot slots[MAX_TERMS]
     cdef list keep
     cdef public dict timings
 
-    def __init__(self, dict dims, dict state, dict atlas, dict params):
+    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms):
         self.keep = []
         self.timings = {name: 0.0 for name in STAGES + ("reset",)}
         self._bind_dims(dims)
@@ -85,12 +92,33 @@ cdef class World:
         self._bind_others(state)
         self._bind_atlas(atlas)
         self._bind_params(params)
+        self._bind_terms(terms, state)
+
+    def _bind_terms(self, list terms, dict s):
+        """Fill the component table of the reward stage (one slot per column)."""
+        cdef int k, M = len(terms)
+        cdef uintptr_t address
+        if not 1 <= M <= MAX_TERMS or M != self.sim.num_terms:
+            raise ValueError(f"terms: expected {self.sim.num_terms} columns (1 to {MAX_TERMS}), got {M}")
+        N = self.sim.W * self.sim.A
+        if s["terms"].shape != (N, M) or s["term_sum"].shape != (self.sim.W, M):
+            raise ValueError(f"buffers terms / term_sum: expected ({N}, {M}) and ({self.sim.W}, {M}), got "
+                             f"{s['terms'].shape} and {s['term_sum'].shape}")
+        for k in range(M):
+            address, args, weight, native = terms[k]
+            self.slots[k].fn = <reward_term_fn>address
+            self.slots[k].native = native
+            self.slots[k].args = NULL
+            if args is not None:
+                self.slots[k].args = <const float*>ptr({"args": args}, "args", np.float32, self.keep)
+            self.slots[k].weight = weight
 
     def _bind_dims(self, dict d):
         self.sim.W = d["W"]; self.sim.A = d["A"]; self.sim.S = d["S"]; self.sim.P = d["P"]
         self.sim.K = d["K"]; self.sim.T = d["T"]; self.sim.G = d["G"]
         self.sim.max_obj = d["max_obj"]; self.sim.max_road = d["max_road"]
         self.sim.cand_cap = d["cand_cap"]; self.sim.obs_dim = d["obs_dim"]
+        self.sim.num_terms = d["num_terms"]
 
     def _bind_agents(self, dict s):
         cdef list k = self.keep
@@ -205,7 +233,7 @@ cdef class World:
             # neighbouring worlds (whose per-slot bytes share cache lines) mostly stay on one
             # thread. Results do not depend on which thread steps a world.
             for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=chunk):
-                step_one(&self.sim, &self.atlas, &self.prm, w)
+                step_one(&self.sim, &self.atlas, &self.prm, self.slots, w)
 
     def _step_profiled(self, int num_threads):
         cdef int w, W = self.sim.W
@@ -222,7 +250,7 @@ cdef class World:
         t2 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
-                reward_world(&self.sim, &self.prm, w)
+                reward_world(&self.sim, &self.atlas, &self.prm, self.slots, w)
         t3 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):

@@ -88,7 +88,8 @@ class SingleAgentEnv(gym.Env):
 
         Returns:
             observation (obs_dim,) float32, reward, terminated, truncated, info with
-            `reward_terms` (8,) float32 (columns `VecEnv.term_names`) and `events` (bit mask).
+            `reward_terms` (M,) float32 (columns `VecEnv.term_names`, the paper's 8 by default)
+            and `events` (bit mask).
 
         Raises:
             ValueError: An action outside the action space (a float or NaN index included).

@@ -1,5 +1,32 @@
-"""Reward terms (paper section 2.3): the registry of the eight kernel terms and Python hooks."""
+"""Reward terms (paper section 2.3): the registry of named terms, `LinearReward`, and the three
+forms of a term (compiled `KernelTerm` from numba or Cython, Python `RewardHook`); see
+docs/components.md "Write a reward term"."""
 
+from selfplaydrive.rewards.components import (
+    ABI_VERSION,
+    SIGNATURE,
+    KernelTerm,
+    LinearReward,
+    TermColumn,
+    describe_terms,
+    get_term,
+    register_term,
+    registered_terms,
+)
 from selfplaydrive.rewards.registry import TERM_NAMES, TERMS, RewardHook, RewardTerm
 
-__all__ = ["TERMS", "TERM_NAMES", "RewardHook", "RewardTerm"]
+__all__ = [
+    "ABI_VERSION",
+    "SIGNATURE",
+    "TERMS",
+    "TERM_NAMES",
+    "KernelTerm",
+    "LinearReward",
+    "RewardHook",
+    "RewardTerm",
+    "TermColumn",
+    "describe_terms",
+    "get_term",
+    "register_term",
+    "registered_terms",
+]

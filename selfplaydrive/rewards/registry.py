@@ -1,8 +1,9 @@
-"""The eight reward terms of section 2.3, in the column order of the (N, 8) per-term buffer.
+"""The eight reward terms of section 2.3, in their default column order of the per-term buffer.
 
-The kernels compute them (_sim/reward.pyx); this registry names and documents them, and
-`RewardHook` is the contract of extra terms written in Python, which run after the kernels on
-read-only views and are added to the reward under their own name.
+The kernels compute them (_sim/reward.pyx, as components of the ABI in selfplaydrive_abi.h);
+this module names and documents them, and `RewardHook` is the contract of terms written in
+Python, which run after the kernels on read-only views. rewards/components.py holds the
+registry of selectable terms and `LinearReward`.
 """
 
 from __future__ import annotations
@@ -51,10 +52,11 @@ TERM_NAMES = tuple(t.name for t in TERMS)
 
 
 class RewardHook(Protocol):
-    """A reward term computed in Python after the kernels.
+    """A reward term computed in Python after the kernels (the Python form of a term; it may
+    replace a registered term of the same name in a `LinearReward`).
 
     Attributes:
-        name: Column name in `VecEnv.extra_terms` and in the episode statistics.
+        name: Column name in `VecEnv.term_names` / `reward_terms` and in the episode statistics.
     """
 
     name: str

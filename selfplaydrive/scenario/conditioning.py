@@ -63,6 +63,10 @@ class ConditioningSampler:
         align_low_prob: Probability of the low mode of C_align.
         eval_waypoint_radius: D [m] in eval mode.
         eval_center_bias: B [m] in eval mode.
+        terms: The reward terms these coefficients condition and their weights (term name ->
+            weight, `selfplaydrive.rewards.LinearReward`), kept here so that the Hydra
+            ``reward`` group selects both; the sampler itself does not use them. None: the
+            paper's eight terms with weight 1. The builder passes them to the env.
 
     Raises:
         ConfigError: On an unknown mode, a malformed range or a probability outside [0, 1].
@@ -85,6 +89,7 @@ class ConditioningSampler:
         align_low_prob: float = 0.5,
         eval_waypoint_radius: float = 3.0,
         eval_center_bias: float = 0.0,
+        terms: Mapping[str, float] | None = None,
     ) -> None:
         if mode not in _MODES:
             raise ConfigError(f"ConditioningSampler mode must be one of {_MODES}, got {mode!r}")
@@ -110,6 +115,9 @@ class ConditioningSampler:
             )
         self.eval_waypoint_radius = float(eval_waypoint_radius)
         self.eval_center_bias = float(eval_center_bias)
+        if terms is not None and not isinstance(terms, Mapping):
+            raise ConfigError(f"reward.terms: expected a mapping of term name -> weight, got {terms!r}")
+        self.terms = dict(terms) if terms is not None else None
         self._lo, self._hi = self._lo_hi()  # the ranges are fixed at construction
 
     def eval_vector(self) -> np.ndarray:

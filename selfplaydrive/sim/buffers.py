@@ -14,7 +14,7 @@ from selfplaydrive._sim.events import collision_scratch
 from selfplaydrive._sim.observe import body_scratch
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
 
-NUM_TERMS = 8
+NUM_TERMS = 8  # the paper's reward terms (section 2.3): the default number of term columns
 NUM_STATS = 8
 
 
@@ -33,6 +33,7 @@ class Dims:
     max_road: int
     cand_cap: int
     obs_dim: int
+    num_terms: int = NUM_TERMS  # columns of `terms` / `term_sum`: the env's selected reward terms
 
     @staticmethod
     def of(sc: Scenario, W: int, G: int, max_obj: int, max_road: int, cand_cap: int, obs_dim: int) -> Dims:
@@ -96,7 +97,7 @@ def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
         road_idx=((N, d.max_road), i4),
         act_i=((N, 2), i4),
         act_f=((N, 2), f4),
-        terms=((N, NUM_TERMS), f4),
+        terms=((N, d.num_terms), f4),
         obs=((N, d.obs_dim), f4),
         final_obs=((N, d.obs_dim), f4),
         st_valid=((d.W * d.S,), u1),
@@ -113,7 +114,7 @@ def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
         done=((d.W,), u1),
         rng_key=((d.W,), np.uint64),
         rng_ctr=((d.W,), np.uint64),
-        term_sum=((d.W, NUM_TERMS), np.float64),
+        term_sum=((d.W, d.num_terms), np.float64),
         ev_count=((d.W, NUM_STATS), np.int64),
         dist=((d.W,), np.float64),
         cand=((d.W, d.cand_cap), i4),

@@ -6,8 +6,10 @@ buffers that the Cython kernels (_sim/) read and write, zero copy.
 
 Buffers after `step` (N = num_worlds * agents per world):
     observations (N, obs_dim) float32: next observation of every slot with `masks` set.
-    rewards (N,) float32, reward_terms (N, 8) float32 (columns `TERM_NAMES`), extra_terms
-        (N, len(reward_hooks)): valid where `reward_mask` (the agent acted this step).
+    rewards (N,) float32, reward_terms (N, M) float32 (one column per selected reward term,
+        named by `term_names`: the paper's eight by default; each column holds weight * term, and
+        `rewards` is their sum), extra_terms (N, len(reward_hooks)): the columns of the
+        `reward_hooks`, the last ones. Valid where `reward_mask` (the agent acted this step).
     terminations, truncations (N,) bool: the agent's episode ended this step.
     final_observations (N, obs_dim): observation at the end, valid where either flag is set.
     masks (N,) bool: slot holds an active agent that acts at the next step.
@@ -19,9 +21,10 @@ observations and `final_observations` keep the last ones of the agents that ende
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from types import SimpleNamespace
 from typing import Any
 
@@ -32,7 +35,8 @@ from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
-from selfplaydrive.rewards.registry import EVENT_NAMES, TERM_NAMES, RewardHook
+from selfplaydrive.rewards.components import KernelTerm, LinearReward
+from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
@@ -65,7 +69,10 @@ class VecEnv:
         num_threads: OpenMP threads stepping the worlds (results do not depend on it), at
             most `MAX_THREADS`.
         terminated_vehicle: "remove" or "obstacle" (stays as a static obstacle).
-        reward_hooks: Python reward terms run after the kernels.
+        reward: The reward terms and their weights (`LinearReward`, or its mapping of term name
+            to weight; default: the paper's eight terms, weight 1, section 2.3). Compiled terms
+            run inside the parallel step, Python terms after it; one column each.
+        reward_hooks: Python reward terms appended to `reward` with weight 1.
         obs_hooks: Python observation features appended after the kernel columns.
         profile: Time each stage (slower: one parallel loop per stage).
 
@@ -88,6 +95,7 @@ class VecEnv:
         seed: int | None = 0,
         num_threads: int = 1,
         terminated_vehicle: str = "remove",
+        reward: LinearReward | Mapping[str, float] | None = None,
         reward_hooks: Sequence[RewardHook] = (),
         obs_hooks: Sequence[ObsHook] = (),
         profile: bool = False,
@@ -117,6 +125,7 @@ class VecEnv:
         self.num_threads = num_threads
         self.terminated_vehicle = terminated_vehicle
         self.reward_hooks = list(reward_hooks)
+        self.reward = _reward(reward).with_hooks(self.reward_hooks)
         self.obs_hooks = list(obs_hooks)
         self.profile = bool(profile)
         self.layout = ObsLayout(
@@ -139,11 +148,14 @@ class VecEnv:
             p.cand_cap,
             self.layout.obs_dim,
         )
+        self.dims = dataclasses.replace(self.dims, num_terms=len(self.reward.columns))
         _check_memory(self.dims)
         self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]
         self.buffers = allocate(self.dims)
         self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
-        self._world = World(self.dims.__dict__, self.buffers, self.atlas, self._kernel_params())
+        self._world = World(
+            self.dims.__dict__, self.buffers, self.atlas, self._kernel_params(), self.reward.plan()
+        )
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
         self.dropped_episode_stats = 0  # records discarded past MAX_EPISODE_STATS
@@ -171,12 +183,19 @@ class VecEnv:
         self.final_observations = _read_only(b["final_obs"])
         self.rewards = b["reward"]
         self.reward_terms = b["terms"]
-        self.extra_terms = np.zeros((self.num_agents, len(self.reward_hooks)), dtype=np.float32)
+        # Python-term columns (filled after the kernels): hooks are the last ones
+        self._python_columns = [k for k, c in enumerate(self.reward.columns) if not c.native]
+        # user-compiled terms run unchecked inside the step: their output is checked after it
+        # (one isfinite over the N rewards); the library's own terms need no check
+        self._check_compiled = any(
+            isinstance(c.term, KernelTerm) and c.term.form != "builtin" for c in self.reward.columns
+        )
+        self.extra_terms = b["terms"][:, b["terms"].shape[1] - len(self.reward_hooks) :]
         self.terminations = b["term"].view(bool)
         self.truncations = b["trunc"].view(bool)
         self.masks = b["active"].view(bool)
         self.reward_mask = np.zeros(self.num_agents, dtype=bool)
-        self.term_names = TERM_NAMES + tuple(h.name for h in self.reward_hooks)
+        self.term_names = self.reward.names
         views = {}
         for name, arr in b.items():
             v = arr.view()
@@ -240,8 +259,10 @@ class VecEnv:
             t = self.action_table
             self._step_external_physics(self.buffers["act_i" if t.discrete else "act_f"])
         self._world.step(self.num_threads, self.profile)
-        if self.reward_hooks:
-            self._run_reward_hooks()
+        if self._check_compiled and not np.isfinite(self.rewards).all():
+            self._report_compiled_terms()
+        if self._python_columns:
+            self._run_python_terms()
         if self.obs_hooks:
             self._run_obs_hooks(self.terminations | self.truncations)
         if not self.buffers["done"].any():
@@ -287,22 +308,43 @@ class VecEnv:
         self._world.after_reset(worlds, self.num_threads)
         self._world.timings["reset"] += time.perf_counter() - t0
 
-    def _run_reward_hooks(self) -> None:
-        for k, hook in enumerate(self.reward_hooks):
-            r = np.asarray(hook(self.state), dtype=np.float32)
-            if r.shape != (self.num_agents,) or not np.all(np.isfinite(r)):
+    def _report_compiled_terms(self) -> None:
+        """Raise naming the compiled term that wrote a non-finite value (section 2.3 columns)."""
+        bad = ~np.isfinite(self.reward_terms)
+        k = int(np.flatnonzero(bad.any(axis=0))[0])
+        i = int(np.flatnonzero(bad[:, k])[0])
+        col = self.reward.columns[k]
+        form = col.term.form if isinstance(col.term, KernelTerm) else "python"
+        raise ValueError(
+            f"reward term {col.name!r} ({form}): wrote {self.reward_terms[i, k]} for agent slot {i} "
+            f"({int(bad[:, k].sum())} non-finite values this step)"
+        )
+
+    def _run_python_terms(self) -> None:
+        """Columns of the Python reward terms, after the kernels (which zeroed them): weighted,
+        added to the reward and to the world's episode sum (section 2.3)."""
+        b = self.buffers
+        for k in self._python_columns:
+            col = self.reward.columns[k]
+            term = col.term
+            assert not isinstance(term, KernelTerm)  # _python_columns holds the Python terms
+            r = np.asarray(term(self.state), dtype=np.float32)
+            if r.shape != (self.num_agents,):
                 raise ValueError(
-                    f"reward hook {hook.name!r}: expected ({self.num_agents},) finite values, "
-                    f"got shape {r.shape}"
+                    f"reward term {col.name!r}: expected an output of shape ({self.num_agents},) "
+                    f"(one value per agent slot), got {r.shape}"
                 )
-            r = np.where(self.reward_mask, r, 0.0).astype(np.float32)
-            self.extra_terms[:, k] = r
+            bad = ~np.isfinite(r) & self.reward_mask
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise ValueError(
+                    f"reward term {col.name!r}: wrote {r[i]} for agent slot {i} "
+                    f"({int(bad.sum())} non-finite values among the agents that acted)"
+                )
+            r = np.where(self.reward_mask, r * np.float32(col.weight), np.float32(0.0)).astype(np.float32)
+            b["terms"][:, k] = r
             self.rewards += r
-        if self.reward_hooks:
-            per_world = self.extra_terms.reshape(self.num_worlds, self.dims.A, -1).sum(axis=1)
-            self._extra_sums = (
-                getattr(self, "_extra_sums", np.zeros_like(per_world, dtype=np.float64)) + per_world
-            )
+            b["term_sum"][:, k] += r.reshape(self.num_worlds, self.dims.A).sum(axis=1, dtype=np.float64)
 
     def _run_obs_hooks(self, ended: np.ndarray | None) -> None:
         col = self.layout.kernel_dim
@@ -322,15 +364,11 @@ class VecEnv:
     # statistics -----------------------------------------------------------------------------
     def _record_episodes(self, worlds: np.ndarray) -> None:
         b, A = self.buffers, self.dims.A
-        extra = getattr(self, "_extra_sums", None)
         for w in worlds:
             a = slice(w * A, (w + 1) * A)
             ever = b["ever"][a]
             spawned = int(np.count_nonzero(b["agent_valid"][a]))
-            terms = {n: float(v) for n, v in zip(TERM_NAMES, b["term_sum"][w], strict=True)}
-            if extra is not None:
-                terms.update({h.name: float(extra[w, k]) for k, h in enumerate(self.reward_hooks)})
-                extra[w] = 0.0
+            terms = {n: float(v) for n, v in zip(self.term_names, b["term_sum"][w], strict=True)}
             rec: dict[str, object] = {
                 "world": int(w),
                 "map": int(b["map_id"][w]),
@@ -388,6 +426,19 @@ class VecEnv:
     @property
     def stage_names(self) -> tuple[str, ...]:
         return (*STAGES, "reset")
+
+
+def _reward(reward: object) -> LinearReward:
+    if reward is None:
+        return LinearReward()
+    if isinstance(reward, Mapping):
+        return LinearReward(reward)
+    if not isinstance(reward, LinearReward):
+        raise ConfigError(
+            "reward: expected a LinearReward (selfplaydrive.rewards.LinearReward({'collision': 1.0, ...})) "
+            f"or a mapping of term name -> weight, got {type(reward).__name__}"
+        )
+    return reward
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

@@ -155,7 +155,9 @@ def test_python_hooks_run_after_kernels(straight_map):
     assert env.observations.shape[1] == env.layout.kernel_dim + 1
     env.step(np.tile(np.array([3, 6]), (env.num_agents, 1)))
     assert env.extra_terms[0, 0] == 1.0 and env.extra_terms[1, 0] == 0.0
-    assert env.rewards[0] == pytest.approx(env.reward_terms[0].sum() + 1.0)
+    # the hook's column is the last column of reward_terms, whose sum is the reward
+    assert env.term_names[-1] == "bonus" and env.reward_terms[0, -1] == 1.0
+    assert env.rewards[0] == pytest.approx(env.reward_terms[0].sum())
     assert env.observations[0, -1] == pytest.approx(0.25)
     with pytest.raises(ValueError):
         env.state.x[0] = 1.0  # read-only views

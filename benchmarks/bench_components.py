@@ -1,0 +1,244 @@
+"""Cost of reward terms as components (issue #13; docs/benchmarks.md "Reward components").
+
+Two measurements, both alternated within one run so that drift of a shared machine hits every
+variant alike:
+
+overhead   The paper configuration stepped by this tree and by a baseline tree (another build
+           of selfplaydrive, e.g. the commit before the components), in alternating child
+           processes: agent-steps per CPU-second and per wall-clock second of each, their
+           ratio, and the median per-step time of the whole step and of the reward stage
+           alone (a second run with `profile=True`). The baseline tree is a folder holding a
+           built `selfplaydrive` package:
+               git worktree add /tmp/base <commit> && cd /tmp/base && \
+                   python setup.py build_ext --inplace -j 2
+terms      The cost of one extra term column in each form: a built-in term of similar work (the
+           paper's off-road term again), the speed-limit term of examples 06-08 as numba cfunc,
+           as Cython package (built into a temporary folder), and in Python/NumPy. Compiled
+           terms are timed in the reward stage (`VecEnv(profile=True)`), the Python term in the
+           whole step; cost = time with the term - time without, per agent-step (medians of
+           per-step times, then of rounds).
+
+Usage:
+    python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--json]
+    python benchmarks/bench_components.py terms [--rounds 5] [--json]
+Run pinned (taskset -c 0) on an otherwise idle machine; both default to one thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+# measure this tree's package (built in place), whatever selfplaydrive is installed
+sys.path.insert(0, str(ROOT))
+
+# the child of `overhead`: only APIs that every version of the package has
+CHILD = r"""
+import json, sys, time
+import numpy as np
+from selfplaydrive.maps.loader import load_map
+from selfplaydrive.scenario.spawner import PaperSpawner
+from selfplaydrive.sim.vec_env import VecEnv
+worlds, threads, steps, warmup = (int(a) for a in sys.argv[1:5])
+env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=threads)
+acts = np.random.default_rng(0).integers(0, [7, 13], size=(steps + warmup, env.num_agents, 2))
+env.reset(0)
+for k in range(warmup):
+    env.step(acts[k])
+n, per_step = 0, []
+c0, t0 = time.process_time(), time.perf_counter()
+for k in range(warmup, warmup + steps):
+    m = int(np.count_nonzero(env.masks))
+    n += m
+    s0 = time.perf_counter()
+    env.step(acts[k])
+    per_step.append((time.perf_counter() - s0) / m * 1e9)
+wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+# the reward stage alone: profile mode times each stage in its own parallel loop
+env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=threads, profile=True)
+env.reset(0)
+for k in range(warmup):
+    env.step(acts[k])
+stage = []
+for k in range(warmup, warmup + steps):
+    m = int(np.count_nonzero(env.masks))
+    r0 = env.timings["reward"]
+    env.step(acts[k])
+    stage.append((env.timings["reward"] - r0) / m * 1e9)
+import selfplaydrive
+print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "median_step_ns": float(np.median(per_step)),
+                  "median_reward_stage_ns": float(np.median(stage)), "package": selfplaydrive.__file__}))
+"""
+
+
+def _child(tree: Path, args: argparse.Namespace) -> dict[str, float]:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    cmd = [
+        sys.executable,
+        "-c",
+        CHILD,
+        str(args.worlds),
+        str(args.threads),
+        str(args.steps),
+        str(args.warmup),
+    ]
+    with tempfile.TemporaryDirectory() as tmp:  # no source tree in the working directory
+        out = subprocess.run(cmd, cwd=tmp, env=env, capture_output=True, text=True, check=True).stdout
+    r = json.loads(out.strip().splitlines()[-1])
+    if not str(r["package"]).startswith(str(tree)):
+        raise RuntimeError(f"the child imported {r['package']}, not the package of {tree}")
+    return r
+
+
+def overhead(args: argparse.Namespace) -> dict[str, object]:
+    """This tree vs `args.baseline`, alternating child processes."""
+    trees = {"baseline": Path(args.baseline).resolve(), "components": ROOT}
+    runs: dict[str, list[dict[str, float]]] = {k: [] for k in trees}
+    for r in range(args.rounds):
+        order = list(trees) if r % 2 == 0 else list(trees)[::-1]  # ABBA: no first-mover bias
+        for name in order:
+            runs[name].append(_child(trees[name], args))
+    out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
+    for name, rs in runs.items():
+        out[name] = {
+            "agent_steps_per_cpu_s": statistics.median(x["agent_steps"] / x["cpu"] for x in rs),
+            "agent_steps_per_s": statistics.median(x["agent_steps"] / x["wall"] for x in rs),
+            "median_step_ns_per_agent": statistics.median(x["median_step_ns"] for x in rs),
+            "median_reward_stage_ns_per_agent": statistics.median(x["median_reward_stage_ns"] for x in rs),
+        }
+    pairs = zip(runs["baseline"], runs["components"], strict=True)
+    ratios = [(b["agent_steps"] / b["cpu"]) / (c["agent_steps"] / c["cpu"]) for b, c in pairs]
+    out["cpu_time_ratio_per_round"] = ratios  # components' CPU time per agent-step / baseline's
+    out["cpu_time_ratio_median"] = statistics.median(ratios)
+    # medians of per-step wall times (robust to other processes on a shared machine)
+    out["median_step_ratio"] = (
+        out["components"]["median_step_ns_per_agent"] / out["baseline"]["median_step_ns_per_agent"]
+    )
+    return out
+
+
+def _variants() -> dict[str, object]:
+    """Extra term of each form (None: the paper's eight only)."""
+    sys.path.insert(0, str(ROOT / "examples"))
+    from selfplaydrive.rewards import get_term
+    from selfplaydrive.testing.build import build_component_package
+
+    variants: dict[str, object] = {"none": None, "builtin": get_term("offroad").renamed("offroad2")}
+    try:
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location("example_07", ROOT / "examples" / "07_term_numba.py")
+        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+        spec.loader.exec_module(module)  # type: ignore[union-attr]
+        variants["numba"] = module.speed_limit_term(0.01, 6.0)
+    except ImportError as exc:
+        print(f"numba form skipped: {exc}", file=sys.stderr)
+    target = Path(tempfile.mkdtemp(prefix="bench_components_"))
+    build_component_package(ROOT / "examples" / "speed_limit_cython", target)
+    sys.path.insert(0, str(target))
+    from speed_limit_term import speed_limit_term  # type: ignore[import-not-found]
+
+    variants["cython"] = speed_limit_term(0.01, 6.0)
+    spec = importlib.util.spec_from_file_location("example_06", ROOT / "examples" / "06_term_python.py")
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    variants["python"] = module.SpeedLimit(0.01, 6.0)
+    return variants
+
+
+def _time_variant(road_map, term, args: argparse.Namespace) -> tuple[float, float]:
+    """(reward-stage ns, whole-step ns) per agent-step with `term` added to the paper's terms."""
+    from selfplaydrive.rewards import TERM_NAMES, LinearReward
+    from selfplaydrive.scenario.spawner import PaperSpawner
+    from selfplaydrive.sim.vec_env import VecEnv
+
+    weights = {n: 1.0 for n in TERM_NAMES}
+    reward = (
+        LinearReward(weights) if term is None else LinearReward({**weights, term.name: 1.0}, terms=[term])
+    )
+    env = VecEnv(
+        road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, reward=reward, profile=True
+    )
+    acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
+    env.reset(0)
+    for k in range(args.warmup):
+        env.step(acts[k])
+    # medians of per-step times: robust to other processes taking the core now and then
+    stage, step = [], []
+    for k in range(args.warmup, args.warmup + args.steps):
+        n = int(np.count_nonzero(env.masks))
+        r0, t0 = env.timings["reward"], time.perf_counter()
+        env.step(acts[k])
+        step.append((time.perf_counter() - t0) / n * 1e9)
+        stage.append((env.timings["reward"] - r0) / n * 1e9)
+    return float(np.median(stage)), float(np.median(step))
+
+
+def terms(args: argparse.Namespace) -> dict[str, object]:
+    """Cost of one extra column per form, alternated over `args.rounds` rounds."""
+    from selfplaydrive.maps.loader import load_map
+
+    road_map = load_map("default")
+    variants = _variants()
+    stage: dict[str, list[float]] = {k: [] for k in variants}
+    step: dict[str, list[float]] = {k: [] for k in variants}
+    for _ in range(args.rounds):
+        for name, term in variants.items():
+            s, w = _time_variant(road_map, term, args)
+            stage[name].append(s)
+            step[name].append(w)
+    med = {k: (statistics.median(stage[k]), statistics.median(step[k])) for k in variants}
+    out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
+    base_stage, base_step = med["none"]
+    builtin = med["builtin"][0] - base_stage
+    for name, (s, w) in med.items():
+        row = {"reward_stage_ns": s, "step_ns": w}
+        if name != "none":
+            # compiled terms run in the reward stage; the Python term after the kernels
+            cost = (w - base_step) if name == "python" else (s - base_stage)
+            row["term_cost_ns"] = cost
+            row["cost_vs_builtin"] = cost / builtin if builtin > 0 else float("nan")
+        out[name] = row
+    return out
+
+
+def _print(title: str, result: dict[str, object], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result, indent=1))
+        return
+    print(title)
+    for k, v in result.items():
+        print(f"  {k}: {v}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("what", choices=("overhead", "terms"))
+    p.add_argument("--baseline", help="folder holding the baseline's built selfplaydrive package (overhead)")
+    p.add_argument("--worlds", type=int, default=32, help="worlds (32 agent slots each)")
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--steps", type=int, default=300, help="timed steps per run")
+    p.add_argument("--warmup", type=int, default=30)
+    p.add_argument("--rounds", type=int, default=6, help="alternations")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    if args.what == "overhead":
+        if not args.baseline:
+            p.error("overhead needs --baseline")
+        _print("overhead (paper configuration, this tree vs baseline)", overhead(args), args.json)
+    else:
+        _print("cost of one extra reward column per form", terms(args), args.json)
+
+
+if __name__ == "__main__":
+    main()
