@@ -7,6 +7,10 @@ optionally alternated with an earlier build of the trainer and models in the sam
     python benchmarks/bench_train.py '~experiment' trainer.torch_threads=1   # paper-size Deep Sets
     python benchmarks/bench_train.py --baseline HEAD~1 --updates 6    # this tree vs HEAD~1
     python benchmarks/bench_train.py --json trainer.torch_threads=2 env.num_threads=2
+    python benchmarks/bench_train.py trainer.torch_threads=2 --baseline-overrides trainer.torch_threads=1
+    python benchmarks/bench_train.py trainer.torch_threads=2 --baseline-env OMP_WAIT_POLICY=passive
+
+(Hydra overrides first: `--baseline-overrides` / `--baseline-env` take every word after them.)
 
 Every build runs in its own worker process: one warm-up update (allocations, first reset), then
 one update per request. With `--baseline REV` the worker of the baseline imports

@@ -1,0 +1,91 @@
+"""benchmarks/bench_train.py: the baseline export and import overlay, and the summary."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_train", REPO / "benchmarks" / "bench_train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_export_and_overlay_find_the_baselines_modules(bench, tmp_path):
+    if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True).returncode:
+        pytest.skip("not a git checkout")
+    bench.export_build("HEAD", tmp_path)
+    trainer = tmp_path / "selfplaydrive" / "trainers" / "ppo" / "trainer.py"
+    assert trainer.is_file() and (tmp_path / "selfplaydrive" / "models" / "deepsets.py").is_file()
+    assert not (tmp_path / "selfplaydrive" / "sim").exists()  # the simulator stays this tree's
+    overlay = bench._Overlay(tmp_path)
+    assert Path(overlay.find_spec("selfplaydrive.trainers.ppo.trainer").origin) == trainer
+    package = overlay.find_spec("selfplaydrive.models")
+    assert package.submodule_search_locations == [str(tmp_path / "selfplaydrive" / "models")]
+    assert overlay.find_spec("selfplaydrive.sim.vec_env") is None
+    assert overlay.find_spec("selfplaydrive.trainers.callbacks") is None
+
+
+def test_overlay_imports_the_exported_code_in_a_fresh_process(bench, tmp_path):
+    if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True).returncode:
+        pytest.skip("not a git checkout")
+    bench.export_build("HEAD", tmp_path)
+    marker = tmp_path / "selfplaydrive" / "models" / "common.py"
+    marker.write_text(marker.read_text() + "\nBASELINE_MARKER = 1\n")
+    code = (
+        f"import sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_train; "
+        f"from pathlib import Path; sys.meta_path.insert(0, bench_train._Overlay(Path({str(tmp_path)!r}))); "
+        "import selfplaydrive.models.common as c; print(c.BASELINE_MARKER, c.__file__)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["1", str(marker)]
+
+
+def test_summary_takes_medians_and_phase_shares(bench):
+    updates = [
+        {
+            "agent_steps": 100,
+            "wall_s": 1.0,
+            "cpu_s": 2.0,
+            "collect_s": 0.5,
+            "env_step": 0.1,
+            "policy": 0.4,
+            "advantages": 0.0,
+            "update": 0.5,
+        },
+        {
+            "agent_steps": 300,
+            "wall_s": 1.0,
+            "cpu_s": 1.0,
+            "collect_s": 0.5,
+            "env_step": 0.2,
+            "policy": 0.3,
+            "advantages": 0.1,
+            "update": 0.4,
+        },
+        {
+            "agent_steps": 1000,
+            "wall_s": 2.0,
+            "cpu_s": 2.0,
+            "collect_s": 1.0,
+            "env_step": 0.2,
+            "policy": 0.8,
+            "advantages": 0.0,
+            "update": 1.0,
+        },
+    ]
+    out = bench.summarize(updates)
+    assert out["agent_steps_per_s"] == 300  # rates 100, 300, 500
+    assert out["agent_steps_per_cpu_s"] == 300  # 50, 300, 500
+    assert out["collect_agent_steps_per_s"] == 600  # 200, 600, 1000
+    assert out["share_env_step"] == pytest.approx(0.1)  # 0.1, 0.2, 0.1
+    assert out["share_update"] == pytest.approx(0.5)  # 0.5, 0.4, 0.5
