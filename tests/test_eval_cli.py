@@ -83,7 +83,8 @@ def test_eval_rule_based_writes_reports(tmp_path, capsys):
         assert data, f"{name}.json is empty"
         assert (out / f"{name}.md").read_text().startswith("## ")
     suites = json.loads((out / "suites.json").read_text())
-    assert set(suites) == {"turn_lanes", "stop_lines", "crosswalks", "red_lights", "stop_signs", "spawn_sanity"}
+    failure_modes = {"red_lights", "stop_signs", "spawn_sanity"}
+    assert set(suites) == {"turn_lanes", "stop_lines", "crosswalks"} | failure_modes
     assert suites["stop_lines"]["generated"] == 2
     assert suites["red_lights"]["generated"] == 4 and suites["spawn_sanity"]["summary"]["n"] == 8
     longform = json.loads((out / "longform.json").read_text())
