@@ -26,6 +26,7 @@ from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.config import PPOConfig
+from selfplaydrive.trainers.ppo.dist import check_resume_agrees
 from selfplaydrive.trainers.ppo.logging import Logger, TensorBoardLogger
 from selfplaydrive.trainers.ppo.trainer import PPOTrainer
 
@@ -89,6 +90,7 @@ def train_run(
         trainer.run_dir = run_dir
         ckpt.remove_stale_tmp(checkpoint.parent, trainer.dist.rank)
         trainer.load(checkpoint)
+        check_resume_agrees(trainer.update_idx, checkpoint, trainer.dist)
     main = trainer.dist.is_main
     run_dir.mkdir(parents=True, exist_ok=True)
     if main and checkpoint is None:

@@ -5,6 +5,10 @@ the trainer's reset), collects its own rollouts, and wraps the model's sequence 
 `DistributedDataParallel`, which averages gradients over ranks in `backward`. Parameters start
 identical (DDP broadcasts rank 0's at construction) and stay identical because every rank
 applies the same averaged gradient with the same optimiser and schedule.
+
+On several machines (`torchrun --nnodes=M`, docs/training.md "Several machines") nothing
+changes but the rank numbers; a resumed job checks that every rank loaded a checkpoint of the
+same update (`check_resume_agrees`).
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import os
 from dataclasses import dataclass
 
 from selfplaydrive._optional import requires_extra
+from selfplaydrive.errors import CheckpointError
+from selfplaydrive.trainers.ppo.checkpoint import checkpoint_name
 
 with requires_extra("torch"):
     import torch
@@ -60,6 +66,39 @@ def all_reduce_mean(value: Tensor, info: DistInfo) -> Tensor:
     out = value.detach().clone()
     td.all_reduce(out, op=td.ReduceOp.SUM)
     return out / info.world_size
+
+
+def check_resume_agrees(update: int, checkpoint: str | os.PathLike[str], info: DistInfo) -> None:
+    """Fail on every rank when the ranks of a resumed job loaded checkpoints of different updates.
+
+    Every rank resumes from its own file, the newest it finds; a node stopped between the
+    ranks' saves leaves the newest update to some ranks only. Resumed anyway, the ranks would
+    count different updates with different parameters (DDP broadcasts only at construction,
+    before the load), write mismatched checkpoints and end at different times.
+
+    Args:
+        update: Updates done in the checkpoint this rank loaded.
+        checkpoint: That checkpoint (named in the error).
+        info: This process's rank; a single process always agrees.
+
+    Raises:
+        CheckpointError: On every rank, listing each rank's update and naming the file of the
+            oldest one, which every rank is likely to still have.
+    """
+    if not info.enabled:
+        return
+    updates = [0] * info.world_size
+    td.all_gather_object(updates, int(update))
+    if len(set(updates)) == 1:
+        return
+    listed = ", ".join(f"rank {r} update {u}" for r, u in enumerate(updates))
+    oldest = checkpoint_name(min(updates))
+    raise CheckpointError(
+        f"resume: the ranks loaded checkpoints of different updates ({listed}), as when a node "
+        f"stopped between the ranks' saves; resume every rank from the same update, e.g. "
+        f"resume=<run folder>/checkpoints/{oldest} (each rank reads its own .rank<r> sibling)",
+        checkpoint,
+    )
 
 
 class SequenceEvaluator(nn.Module):
