@@ -8,7 +8,7 @@ import json
 import os
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,9 +222,23 @@ def train_task(cfg: Any) -> dict[str, Any]:
     return train_run(env, model, trainer, run_dir, logger=logger, resume=cfg.get("resume"))
 
 
+def torchrun_run_dir(argv: Sequence[str], environ: Mapping[str, str] | None = None) -> list[str]:
+    """Under torchrun, one run folder for every rank: the default folder is a time stamp that
+    each process takes from its own clock, so ranks starting in different seconds (other nodes)
+    would write to separate folders. Without an explicit `hydra.run.dir`, the folder is named
+    by torchrun's run id (`--rdzv-id`, the same on every node)."""
+    env = os.environ if environ is None else environ
+    run_id = env.get("TORCHELASTIC_RUN_ID")
+    if not run_id or int(env.get("WORLD_SIZE", "1")) <= 1:
+        return list(argv)
+    if any(a.startswith(("hydra.run.dir=", "-m", "--multirun")) for a in argv):
+        return list(argv)
+    return [*argv, f"hydra.run.dir=outputs/train/torchrun-{run_id}"]
+
+
 def cmd_train(argv: Sequence[str]) -> int:
     """``selfplaydrive train [overrides] [-m]``."""
-    return run_hydra("train", train_task, argv)
+    return run_hydra("train", train_task, torchrun_run_dir(argv))
 
 
 def eval_task(cfg: Any) -> Any:
