@@ -240,7 +240,11 @@ class RuleBasedDriver:
         cs = np.clip(cs + ((xy - pxy) * tan).sum(-1), 0.0, T.length[cl])
         pxy, tan = T.point_at(cl, cs)
         rel = xy - pxy
-        lat = np.abs(rel[..., 0] * tan[..., 1] - rel[..., 1] * tan[..., 0])
+        # the distance to the lane's nearest point, not only its lateral part: where the
+        # projection is clipped to a lane's start (a successor a few metres ahead), the
+        # along-track gap counts, else the car would jump onto the next lane before the stop
+        # line at the end of its own and lose the red light on it
+        lat = np.hypot(rel[..., 0], rel[..., 1])
         cosd = tan[..., 0] * ego["c"][:, None] + tan[..., 1] * ego["s"][:, None]
         cost = lat + 4.0 * (1.0 - cosd) + np.where(cosd < 0.0, 100.0, 0.0)
         on_route = (cl[:, :, None] == self.route[:, None, :3]).any(-1)
