@@ -1,9 +1,26 @@
 # cython: language_level=3
-"""Lane-graph kernels of one map (_sim/lanes.pyx): the parts the spawner's `RouteKernel`
-(_sim/waypoints.pyx) calls."""
+"""Lane-graph kernels of one map (_sim/lanes.pyx): the parts the spawner's kernels call
+(`RouteKernel` in waypoints.pyx, `ChunkKernel` in placement.pyx). Map-level: nothing here
+depends on the spawner."""
 
 cimport numpy as cnp
-from selfplaydrive._sim.spawn_common cimport f64, i64, u64
+
+ctypedef cnp.float64_t f64
+ctypedef cnp.int64_t i64
+ctypedef cnp.uint64_t u64
+
+
+cdef inline i64 _lane_piece(const f64[::1] gcum, const i64[::1] offsets, i64 ln, double g) noexcept nogil:
+    """Centreline piece of lane `ln` holding flat arc length g: the largest lo with
+    gcum[lo] <= g, within [offsets[ln], offsets[ln + 1] - 2] (binary search)."""
+    cdef i64 lo = offsets[ln], hi = offsets[ln + 1] - 2, mid
+    while lo < hi:
+        mid = (lo + hi + 1) >> 1
+        if gcum[mid] <= g:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
 
 
 cdef void walk_one(

@@ -10,7 +10,6 @@ generator; the NumPy twins are in `selfplaydrive/testing/spawn_reference.py`.
 import numpy as np
 
 cimport numpy as cnp
-from selfplaydrive._sim.spawn_common cimport _lane_piece
 
 cnp.import_array()
 

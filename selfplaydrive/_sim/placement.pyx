@@ -14,8 +14,9 @@ from libc.math cimport cos, fabs, hypot, sin
 from libc.stdlib cimport free
 from numpy.random cimport bitgen_t
 from selfplaydrive._sim.spawn_common cimport (
-    f64, i64, _alloc, _bitgen, _box_cells, _box_count, _draw, _field, _lane_piece, _size, _wrap_angle,
+    f64, i64, _alloc, _bitgen, _box_cells, _box_count, _draw, _field, _size, _wrap_angle,
 )
+from selfplaydrive._sim.lanes cimport _lane_piece
 from selfplaydrive._sim.waypoints cimport RouteKernel
 
 cnp.import_array()
@@ -412,17 +413,112 @@ cdef class Placer:
         """
         if want < 1 or not 0 <= n_parked <= want:
             raise ValueError(f"Placer.agents: need want >= 1 and 0 <= n_parked <= want, got {want}, {n_parked}")
-        cdef RouteKernel r = spawn.r
         cdef bitgen_t* bg = _bitgen(rng)
         cdef Py_ssize_t k_r = roadside.count(box) if n_parked > 0 else 0, k_s = spawn.count(box)
-        cdef Py_ssize_t got = 0, parked, need, block = 0, j, i, n_ids
+        cdef Py_ssize_t k = k_r if k_r > k_s else k_s, got = 0, parked
+        cdef double* rows = <double*>_alloc(want * NCOL * sizeof(double))
+        cdef Py_ssize_t* order = NULL
+        cdef i64* ids = NULL
+        cdef f64* cdf = NULL
+        cdef double* buf = NULL
+        try:
+            order = <Py_ssize_t*>_alloc(want * sizeof(Py_ssize_t))
+            ids = <i64*>_alloc(k * sizeof(i64))
+            cdf = <f64*>_alloc(k * sizeof(f64))
+            buf = <double*>_alloc(want * self.first * 8 * sizeof(double))
+            with rng.bit_generator.lock:
+                if k_r > 0:
+                    got = self._parked(roadside, bg, box, n_parked, ids, cdf, rows)
+                parked = got
+                if k_s > 0 and want > parked:
+                    got = self._aligned(spawn, bg, box, want, got, ids, cdf, buf, rows)
+                _shuffle(bg, order, got)
+            lane_arr, s_arr = self._write_agents(rows, order, got, sc, want)
+        finally:
+            free(rows)
+            free(order)
+            free(ids)
+            free(cdf)
+            free(buf)
+        return got, parked, lane_arr, s_arr
+
+    cdef Py_ssize_t _parked(self, ChunkKernel roadside, bitgen_t* bg, const f64[::1] box, Py_ssize_t n_parked,
+                            i64* ids, f64* cdf, double* rows) noexcept:
+        """Up to n_parked parked agents at roadside spots into rows[0:]; returns their number."""
+        cdef Py_ssize_t got = 0, j, n_ids = roadside.gather(box, ids, cdf)
+        cdef RouteKernel r = roadside.r
+        cdef double u[5]
+        cdef double o[3]
+        cdef double L, W, lw
+        cdef bint fits
+        cdef Pose p
+        cdef double* row
+        for j in range(n_parked * self.per_agent if n_ids > 0 else 0):
+            # a parked agent may block its lane (fits is not required, unlike a static vehicle)
+            if not _roadside_candidate(roadside, r, bg, box, ids, cdf, n_ids, self.sizes, self.curb_gap,
+                                       self.max_shoulder, 0.0, u, &p, &L, &W, o, &fits):
+                continue
+            if not _spaced(rows, got, o[0], o[1], self.min_dist):
+                continue
+            lw = r.lane_width[p.lane]
+            row = rows + got * NCOL
+            row[COL_LANE] = <double>p.lane
+            row[COL_S] = p.s
+            row[COL_X] = o[0]
+            row[COL_Y] = o[1]
+            row[COL_HEADING] = r.heading[p.piece]
+            row[COL_SPEED] = 0.0
+            row[COL_LENGTH] = L
+            row[COL_WIDTH] = W
+            row[COL_PARKED] = 1.0
+            row[COL_ON_LANE] = 1.0 if o[2] <= lw / 2 else 0.0
+            got += 1
+            if got >= n_parked:
+                break
+        return got
+
+    cdef Py_ssize_t _aligned(self, ChunkKernel spawn, bitgen_t* bg, const f64[::1] box, Py_ssize_t want,
+                             Py_ssize_t got, i64* ids, f64* cdf, double* buf, double* rows) noexcept:
+        """Aligned agents on the spawn chunks after the `got` parked ones, until `want` in all
+        (the first need * first_round_candidates draws taken as one block into buf); returns
+        the number of agents in rows."""
+        cdef RouteKernel r = spawn.r
+        cdef Py_ssize_t need = want - got, block = 0, j, n_ids = spawn.gather(box, ids, cdf)
         cdef double lim = self.min_dist, near = self.min_dist - self.lateral_noise - 1e-6
         cdef double u[8]
-        cdef double o[3]
         cdef double* uu
+        cdef double L, W
         cdef Pose p
-        cdef double L, W, lw
-        cdef Py_ssize_t tmp
+        if n_ids > 0:
+            block = need * self.first
+            _draw(bg, buf, block * 8)
+        for j in range(need * self.per_agent if n_ids > 0 else 0):
+            if j < block:
+                uu = buf + j * 8
+            else:
+                _draw(bg, u, 8)
+                uu = u
+            if not spawn.pose(ids, cdf, n_ids, box, uu[0], uu[1], &p):
+                continue
+            # the lateral shift moves the centre at most lateral_noise: a pose that close to an
+            # agent is rejected for sure, before its size and noise
+            if near > 0.0 and not _spaced(rows, got, p.x, p.y, near):
+                continue
+            self.sizes.draw(&uu[2], &L, &W)
+            _aligned_row(p.lane, p.s, p.x, p.y, r.heading[p.piece], r.hsin[p.piece], r.hcos[p.piece],
+                         L, W, uu[5], uu[6], uu[7], r.lane_width[p.lane], r.speed_limit[p.lane],
+                         self.lateral_noise, self.heading_noise, self.speed_lo, self.speed_hi,
+                         rows + got * NCOL)
+            if not _spaced(rows, got, rows[got * NCOL + COL_X], rows[got * NCOL + COL_Y], lim):
+                continue
+            got += 1
+            if got >= want:
+                break
+        return got
+
+    cdef tuple _write_agents(self, const double* rows, const Py_ssize_t* order, Py_ssize_t got, object sc,
+                             Py_ssize_t want):
+        """Rows in slot order into the agent slots of `sc`; returns the route starts (lane, s)."""
         cdef cnp.npy_bool* valid = <cnp.npy_bool*>_field(sc, "agent_valid", cnp.NPY_BOOL, want)
         cdef float* xy = <float*>_field(sc, "agent_xy", cnp.NPY_FLOAT32, 2 * want)
         cdef float* heading = <float*>_field(sc, "agent_heading", cnp.NPY_FLOAT32, want)
@@ -431,104 +527,24 @@ cdef class Placer:
         cdef float* width = <float*>_field(sc, "agent_width", cnp.NPY_FLOAT32, want)
         cdef cnp.npy_bool* parked_out = <cnp.npy_bool*>_field(sc, "agent_parked", cnp.NPY_BOOL, want)
         cdef cnp.int32_t* lane_out = <cnp.int32_t*>_field(sc, "agent_lane", cnp.NPY_INT32, want)
-        cdef double* rows = <double*>_alloc(want * NCOL * sizeof(double))
-        cdef Py_ssize_t* order = NULL
-        cdef i64* ids = NULL
-        cdef f64* cdf = NULL
-        cdef double* buf = NULL
-        try:
-            order = <Py_ssize_t*>_alloc(want * sizeof(Py_ssize_t))
-            ids = <i64*>_alloc((k_r if k_r > k_s else k_s) * sizeof(i64))
-            cdf = <f64*>_alloc((k_r if k_r > k_s else k_s) * sizeof(f64))
-            buf = <double*>_alloc(want * self.first * 8 * sizeof(double))
-            with rng.bit_generator.lock:
-                # parked agents at roadside spots
-                n_ids = roadside.gather(box, ids, cdf) if k_r > 0 else 0
-                for j in range(n_parked * self.per_agent if n_ids > 0 else 0):
-                    _draw(bg, u, 5)
-                    if not roadside.pose(ids, cdf, n_ids, box, u[0], u[1], &p):
-                        continue
-                    self.sizes.draw(&u[2], &L, &W)
-                    lw = r.lane_width[p.lane]
-                    _roadside(p.x, p.y, r.hsin[p.piece], r.hcos[p.piece], W, lw, roadside.edge[p.chunk],
-                              self.curb_gap, self.max_shoulder, 0.0, o)
-                    if not _spaced(rows, got, o[0], o[1], lim):
-                        continue
-                    uu = rows + got * NCOL
-                    uu[COL_LANE] = <double>p.lane
-                    uu[COL_S] = p.s
-                    uu[COL_X] = o[0]
-                    uu[COL_Y] = o[1]
-                    uu[COL_HEADING] = r.heading[p.piece]
-                    uu[COL_SPEED] = 0.0
-                    uu[COL_LENGTH] = L
-                    uu[COL_WIDTH] = W
-                    uu[COL_PARKED] = 1.0
-                    uu[COL_ON_LANE] = 1.0 if o[2] <= lw / 2 else 0.0
-                    got += 1
-                    if got >= n_parked:
-                        break
-                parked = got
-                # aligned agents on the spawn chunks
-                need = want - parked
-                n_ids = spawn.gather(box, ids, cdf) if k_s > 0 and need > 0 else 0
-                if n_ids > 0:
-                    block = need * self.first
-                    _draw(bg, buf, block * 8)
-                for j in range(need * self.per_agent if n_ids > 0 else 0):
-                    if j < block:
-                        uu = buf + j * 8
-                    else:
-                        _draw(bg, u, 8)
-                        uu = u
-                    if not spawn.pose(ids, cdf, n_ids, box, uu[0], uu[1], &p):
-                        continue
-                    # the lateral shift moves the centre at most lateral_noise: a pose that
-                    # close to an agent is rejected for sure, before its size and noise
-                    if near > 0.0 and not _spaced(rows, got, p.x, p.y, near):
-                        continue
-                    self.sizes.draw(&uu[2], &L, &W)
-                    _aligned_row(p.lane, p.s, p.x, p.y, r.heading[p.piece], r.hsin[p.piece], r.hcos[p.piece],
-                                 L, W, uu[5], uu[6], uu[7], r.lane_width[p.lane], r.speed_limit[p.lane],
-                                 self.lateral_noise, self.heading_noise, self.speed_lo, self.speed_hi,
-                                 rows + got * NCOL)
-                    if not _spaced(rows, got, rows[got * NCOL + COL_X], rows[got * NCOL + COL_Y], lim):
-                        continue
-                    got += 1
-                    if got >= want:
-                        break
-                # shuffle parked and aligned agents over the slots
-                for i in range(got):
-                    order[i] = i
-                for i in range(got - 1, 0, -1):
-                    j = <Py_ssize_t>(bg.next_double(bg.state) * (i + 1))
-                    if j > i:
-                        j = i
-                    tmp = order[i]
-                    order[i] = order[j]
-                    order[j] = tmp
-            lane_arr = np.empty(got, dtype=np.int64)
-            s_arr = np.empty(got)
-            for i in range(got):
-                uu = rows + order[i] * NCOL
-                valid[i] = True
-                xy[2 * i] = <float>uu[COL_X]
-                xy[2 * i + 1] = <float>uu[COL_Y]
-                heading[i] = <float>uu[COL_HEADING]
-                speed[i] = <float>uu[COL_SPEED]
-                length[i] = <float>uu[COL_LENGTH]
-                width[i] = <float>uu[COL_WIDTH]
-                parked_out[i] = uu[COL_PARKED] != 0.0
-                lane_out[i] = <cnp.int32_t>uu[COL_LANE] if uu[COL_ON_LANE] != 0.0 else -1
-                (<i64*>cnp.PyArray_DATA(lane_arr))[i] = <i64>uu[COL_LANE]
-                (<f64*>cnp.PyArray_DATA(s_arr))[i] = uu[COL_S]
-        finally:
-            free(rows)
-            free(order)
-            free(ids)
-            free(cdf)
-            free(buf)
-        return got, parked, lane_arr, s_arr
+        cdef Py_ssize_t i
+        cdef const double* row
+        lane_arr = np.empty(got, dtype=np.int64)
+        s_arr = np.empty(got)
+        for i in range(got):
+            row = rows + order[i] * NCOL
+            valid[i] = True
+            xy[2 * i] = <float>row[COL_X]
+            xy[2 * i + 1] = <float>row[COL_Y]
+            heading[i] = <float>row[COL_HEADING]
+            speed[i] = <float>row[COL_SPEED]
+            length[i] = <float>row[COL_LENGTH]
+            width[i] = <float>row[COL_WIDTH]
+            parked_out[i] = row[COL_PARKED] != 0.0
+            lane_out[i] = <cnp.int32_t>row[COL_LANE] if row[COL_ON_LANE] != 0.0 else -1
+            (<i64*>cnp.PyArray_DATA(lane_arr))[i] = <i64>row[COL_LANE]
+            (<f64*>cnp.PyArray_DATA(s_arr))[i] = row[COL_S]
+        return lane_arr, s_arr
 
     def statics(self, ChunkKernel roadside, object rng, const f64[::1] box, Py_ssize_t want,
                 Py_ssize_t n_agents, object sc):
@@ -549,24 +565,9 @@ cdef class Placer:
         """
         if want < 0 or n_agents < 0:
             raise ValueError(f"Placer.statics: want and n_agents must be >= 0, got {want}, {n_agents}")
-        cdef RouteKernel r = roadside.r
         cdef bitgen_t* bg = _bitgen(rng)
-        cdef Py_ssize_t k = roadside.count(box) if want > 0 else 0, n_ids, j, i, m = 0
-        cdef double gap = self.static_gap
-        cdef double u[5]
-        cdef double o[3]
-        cdef double L, W, rad, dx, dy, lim, ahead, c, s
-        cdef bint ok
-        cdef Pose p
-        cdef const float* a_xy = <float*>_field(sc, "agent_xy", cnp.NPY_FLOAT32, 2 * n_agents)
-        cdef const float* a_h = <float*>_field(sc, "agent_heading", cnp.NPY_FLOAT32, n_agents)
-        cdef const float* a_v = <float*>_field(sc, "agent_speed", cnp.NPY_FLOAT32, n_agents)
-        cdef const float* a_len = <float*>_field(sc, "agent_length", cnp.NPY_FLOAT32, n_agents)
-        cdef const float* a_w = <float*>_field(sc, "agent_width", cnp.NPY_FLOAT32, n_agents)
-        cdef const cnp.npy_bool* a_parked = <cnp.npy_bool*>_field(sc, "agent_parked", cnp.NPY_BOOL, n_agents)
-        cdef cnp.npy_bool* s_valid = <cnp.npy_bool*>_field(sc, "static_valid", cnp.NPY_BOOL, want)
+        cdef Py_ssize_t k = roadside.count(box) if want > 0 else 0, i, j, m = 0
         cdef float* s_xy = <float*>_field(sc, "static_xy", cnp.NPY_FLOAT32, 2 * want)
-        cdef float* s_h = <float*>_field(sc, "static_heading", cnp.NPY_FLOAT32, want)
         cdef float* s_len = <float*>_field(sc, "static_length", cnp.NPY_FLOAT32, want)
         cdef float* s_w = <float*>_field(sc, "static_width", cnp.NPY_FLOAT32, want)
         veh_xy_arr = np.empty((n_agents + want, 2))
@@ -575,89 +576,16 @@ cdef class Placer:
         cdef f64* veh_xy = <f64*>cnp.PyArray_DATA(veh_xy_arr)
         cdef f64* veh_r = <f64*>cnp.PyArray_DATA(veh_r_arr)
         cdef cnp.npy_bool* still = <cnp.npy_bool*>cnp.PyArray_DATA(still_arr)
-        # per agent: keep-clear zone centre x, y, cos, sin, half length, half width, its
-        # circumradius, and the reach (from the agent's centre) of both tests
         cdef double* zone = <double*>_alloc(n_agents * 8 * sizeof(double))
-        cdef double* acc = NULL
         cdef i64* ids = NULL
         cdef f64* cdf = NULL
-        cdef double* z
         try:
-            acc = <double*>_alloc(want * 3 * sizeof(double))
             ids = <i64*>_alloc(k * sizeof(i64))
             cdf = <f64*>_alloc(k * sizeof(f64))
-            for i in range(n_agents):
-                veh_xy[2 * i] = a_xy[2 * i]
-                veh_xy[2 * i + 1] = a_xy[2 * i + 1]
-                veh_r[i] = 0.5 * hypot(a_len[i], a_w[i])
-                still[i] = a_parked[i]
-                c = cos(a_h[i])
-                s = sin(a_h[i])
-                ahead = self.clear_ahead + a_v[i] * self.headway
-                z = zone + 8 * i
-                z[0] = a_xy[2 * i] + 0.5 * ahead * c
-                z[1] = a_xy[2 * i + 1] + 0.5 * ahead * s
-                z[2] = c
-                z[3] = s
-                z[4] = 0.5 * a_len[i] + gap + 0.5 * ahead
-                z[5] = 0.5 * a_w[i] + gap
-                z[6] = hypot(z[4], z[5])
-                z[7] = veh_r[i] + gap if veh_r[i] + gap > 0.5 * ahead + z[6] else 0.5 * ahead + z[6]
-            with rng.bit_generator.lock:
-                n_ids = roadside.gather(box, ids, cdf) if k > 0 else 0
-                for j in range(want * self.per_static if n_ids > 0 else 0):
-                    _draw(bg, u, 5)
-                    if not roadside.pose(ids, cdf, n_ids, box, u[0], u[1], &p):
-                        continue
-                    self.static_sizes.draw(&u[2], &L, &W)
-                    # section 2.2: stationary vehicles must not block a lane completely
-                    if not _roadside(p.x, p.y, r.hsin[p.piece], r.hcos[p.piece], W, r.lane_width[p.lane],
-                                     roadside.edge[p.chunk], self.curb_gap, self.max_shoulder, self.min_free, o):
-                        continue
-                    rad = 0.5 * hypot(L, W)
-                    ok = True
-                    for i in range(n_agents):
-                        z = zone + 8 * i
-                        dx = o[0] - veh_xy[2 * i]
-                        dy = o[1] - veh_xy[2 * i + 1]
-                        lim = rad + z[7]
-                        if dx * dx + dy * dy >= lim * lim:  # too far for either test
-                            continue
-                        lim = rad + veh_r[i] + gap
-                        if dx * dx + dy * dy < lim * lim:
-                            ok = False
-                            break
-                        dx = o[0] - z[0]
-                        dy = o[1] - z[1]
-                        lim = rad + z[6]
-                        if dx * dx + dy * dy < lim * lim and _boxes_meet(
-                            z[0], z[1], z[2], z[3], z[4], z[5], o[0], o[1], r.hcos[p.piece], r.hsin[p.piece],
-                            0.5 * L, 0.5 * W,
-                        ):
-                            ok = False
-                            break
-                    if ok:
-                        for i in range(m):
-                            dx = o[0] - acc[3 * i]
-                            dy = o[1] - acc[3 * i + 1]
-                            lim = rad + acc[3 * i + 2] + gap
-                            if dx * dx + dy * dy < lim * lim:
-                                ok = False
-                                break
-                    if not ok:
-                        continue
-                    acc[3 * m] = o[0]
-                    acc[3 * m + 1] = o[1]
-                    acc[3 * m + 2] = rad
-                    s_valid[m] = True
-                    s_xy[2 * m] = <float>o[0]
-                    s_xy[2 * m + 1] = <float>o[1]
-                    s_h[m] = <float>r.heading[p.piece]
-                    s_len[m] = <float>L
-                    s_w[m] = <float>W
-                    m += 1
-                    if m >= want:
-                        break
+            self._agent_zones(sc, n_agents, veh_xy, veh_r, still, zone)
+            if k > 0:
+                with rng.bit_generator.lock:
+                    m = self._place_statics(roadside, bg, box, want, n_agents, veh_xy, veh_r, zone, ids, cdf, sc)
             for i in range(m):
                 j = n_agents + i
                 veh_xy[2 * j] = s_xy[2 * i]
@@ -666,7 +594,162 @@ cdef class Placer:
                 still[j] = True
         finally:
             free(zone)
-            free(acc)
             free(ids)
             free(cdf)
         return m, veh_xy_arr[:n_agents + m], veh_r_arr[:n_agents + m], still_arr[:n_agents + m]
+
+    cdef int _agent_zones(self, object sc, Py_ssize_t n_agents, f64* veh_xy, f64* veh_r, cnp.npy_bool* still,
+                          double* zone) except -1:
+        """Per agent of `sc`: its centre, bounding-circle radius and whether it stands still, and
+        its keep-clear zone: centre x, y, cos, sin, half length, half width, the zone's
+        circumradius, and the reach (from the agent's centre) of both static-vehicle tests."""
+        cdef const float* a_xy = <float*>_field(sc, "agent_xy", cnp.NPY_FLOAT32, 2 * n_agents)
+        cdef const float* a_h = <float*>_field(sc, "agent_heading", cnp.NPY_FLOAT32, n_agents)
+        cdef const float* a_v = <float*>_field(sc, "agent_speed", cnp.NPY_FLOAT32, n_agents)
+        cdef const float* a_len = <float*>_field(sc, "agent_length", cnp.NPY_FLOAT32, n_agents)
+        cdef const float* a_w = <float*>_field(sc, "agent_width", cnp.NPY_FLOAT32, n_agents)
+        cdef const cnp.npy_bool* a_parked = <cnp.npy_bool*>_field(sc, "agent_parked", cnp.NPY_BOOL, n_agents)
+        cdef Py_ssize_t i
+        cdef double c, s, ahead, gap = self.static_gap
+        cdef double* z
+        for i in range(n_agents):
+            veh_xy[2 * i] = a_xy[2 * i]
+            veh_xy[2 * i + 1] = a_xy[2 * i + 1]
+            veh_r[i] = 0.5 * hypot(a_len[i], a_w[i])
+            still[i] = a_parked[i]
+            c = cos(a_h[i])
+            s = sin(a_h[i])
+            ahead = self.clear_ahead + a_v[i] * self.headway
+            z = zone + 8 * i
+            z[0] = a_xy[2 * i] + 0.5 * ahead * c
+            z[1] = a_xy[2 * i + 1] + 0.5 * ahead * s
+            z[2] = c
+            z[3] = s
+            z[4] = 0.5 * a_len[i] + gap + 0.5 * ahead
+            z[5] = 0.5 * a_w[i] + gap
+            z[6] = hypot(z[4], z[5])
+            z[7] = veh_r[i] + gap if veh_r[i] + gap > 0.5 * ahead + z[6] else 0.5 * ahead + z[6]
+        return 0
+
+    cdef Py_ssize_t _place_statics(self, ChunkKernel roadside, bitgen_t* bg, const f64[::1] box, Py_ssize_t want,
+                                   Py_ssize_t n_agents, const f64* veh_xy, const f64* veh_r, const double* zone,
+                                   i64* ids, f64* cdf, object sc) except -1:
+        """The candidate loop of `statics`: accepted vehicles into the static slots of `sc`;
+        returns their number."""
+        cdef RouteKernel r = roadside.r
+        cdef cnp.npy_bool* s_valid = <cnp.npy_bool*>_field(sc, "static_valid", cnp.NPY_BOOL, want)
+        cdef float* s_xy = <float*>_field(sc, "static_xy", cnp.NPY_FLOAT32, 2 * want)
+        cdef float* s_h = <float*>_field(sc, "static_heading", cnp.NPY_FLOAT32, want)
+        cdef float* s_len = <float*>_field(sc, "static_length", cnp.NPY_FLOAT32, want)
+        cdef float* s_w = <float*>_field(sc, "static_width", cnp.NPY_FLOAT32, want)
+        cdef Py_ssize_t j, m = 0, n_ids = roadside.gather(box, ids, cdf)
+        cdef double u[5]
+        cdef double o[3]
+        cdef double L, W, rad
+        cdef bint fits
+        cdef Pose p
+        cdef double* acc = <double*>_alloc(want * 3 * sizeof(double))
+        try:
+            for j in range(want * self.per_static if n_ids > 0 else 0):
+                if not _roadside_candidate(roadside, r, bg, box, ids, cdf, n_ids, self.static_sizes,
+                                           self.curb_gap, self.max_shoulder, self.min_free, u, &p, &L, &W, o,
+                                           &fits):
+                    continue
+                if not fits:  # section 2.2: stationary vehicles must not block a lane completely
+                    continue
+                rad = 0.5 * hypot(L, W)
+                if not _clear_of_agents(zone, veh_xy, veh_r, n_agents, o, rad, self.static_gap,
+                                        r.hcos[p.piece], r.hsin[p.piece], L, W):
+                    continue
+                if not _clear_of_statics(acc, m, o, rad, self.static_gap):
+                    continue
+                acc[3 * m] = o[0]
+                acc[3 * m + 1] = o[1]
+                acc[3 * m + 2] = rad
+                s_valid[m] = True
+                s_xy[2 * m] = <float>o[0]
+                s_xy[2 * m + 1] = <float>o[1]
+                s_h[m] = <float>r.heading[p.piece]
+                s_len[m] = <float>L
+                s_w[m] = <float>W
+                m += 1
+                if m >= want:
+                    break
+        finally:
+            free(acc)
+        return m
+
+
+cdef inline bint _roadside_candidate(ChunkKernel roadside, RouteKernel r, bitgen_t* bg, const f64[::1] box,
+                                     const i64* ids, const f64* cdf, Py_ssize_t n_ids, SizeTable sizes,
+                                     double curb_gap, double max_shoulder, double min_free, double* u, Pose* p,
+                                     double* L, double* W, double* o, bint* fits) noexcept:
+    """One roadside candidate (parked agents and static vehicles) from the next draws u[0:5]
+    (chunk, arc length, size): its pose on the n_ids gathered chunks (False when outside `box`:
+    the draws are spent all the same), its size and the centre beside the lane (`_roadside`:
+    o = x, y, offset; fits: it leaves `min_free` m of its lane free). r: the chunks' route
+    tables (`roadside.r`, passed so the candidate loop holds no reference of its own)."""
+    _draw(bg, u, 5)
+    if not roadside.pose(ids, cdf, n_ids, box, u[0], u[1], p):
+        return False
+    sizes.draw(&u[2], L, W)
+    fits[0] = _roadside(p.x, p.y, r.hsin[p.piece], r.hcos[p.piece], W[0], r.lane_width[p.lane],
+                        roadside.edge[p.chunk], curb_gap, max_shoulder, min_free, o)
+    return True
+
+
+cdef inline bint _clear_of_agents(const double* zone, const f64* veh_xy, const f64* veh_r, Py_ssize_t n_agents,
+                                  const double* o, double rad, double gap, double c, double s, double L,
+                                  double W) noexcept nogil:
+    """Whether a static vehicle at o (bounding radius rad, heading (c, s), size L x W) keeps
+    `gap` from every agent's bounding circle and stays out of every agent's keep-clear zone
+    (`Placer._agent_zones`)."""
+    cdef Py_ssize_t i
+    cdef double dx, dy, lim
+    cdef const double* z
+    for i in range(n_agents):
+        z = zone + 8 * i
+        dx = o[0] - veh_xy[2 * i]
+        dy = o[1] - veh_xy[2 * i + 1]
+        lim = rad + z[7]
+        if dx * dx + dy * dy >= lim * lim:  # too far for either test
+            continue
+        lim = rad + veh_r[i] + gap
+        if dx * dx + dy * dy < lim * lim:
+            return False
+        dx = o[0] - z[0]
+        dy = o[1] - z[1]
+        lim = rad + z[6]
+        if dx * dx + dy * dy < lim * lim and _boxes_meet(z[0], z[1], z[2], z[3], z[4], z[5], o[0], o[1], c, s,
+                                                         0.5 * L, 0.5 * W):
+            return False
+    return True
+
+
+cdef inline bint _clear_of_statics(const double* acc, Py_ssize_t m, const double* o, double rad,
+                                   double gap) noexcept nogil:
+    """Whether a static vehicle at o (bounding radius rad) keeps `gap` from the m accepted
+    ones (acc: x, y, radius each)."""
+    cdef Py_ssize_t i
+    cdef double dx, dy, lim
+    for i in range(m):
+        dx = o[0] - acc[3 * i]
+        dy = o[1] - acc[3 * i + 1]
+        lim = rad + acc[3 * i + 2] + gap
+        if dx * dx + dy * dy < lim * lim:
+            return False
+    return True
+
+
+cdef inline void _shuffle(bitgen_t* bg, Py_ssize_t* order, Py_ssize_t n) noexcept nogil:
+    """order = a permutation of 0..n-1: Fisher-Yates from the last slot down, one draw each."""
+    cdef Py_ssize_t i, j, tmp
+    for i in range(n):
+        order[i] = i
+    for i in range(n - 1, 0, -1):
+        j = <Py_ssize_t>(bg.next_double(bg.state) * (i + 1))
+        if j > i:
+            j = i
+        tmp = order[i]
+        order[i] = order[j]
+        order[j] = tmp

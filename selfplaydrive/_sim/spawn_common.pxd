@@ -1,7 +1,8 @@
 # cython: language_level=3
 """Building blocks shared by the spawner kernels (_sim/lanes.pyx, waypoints.pyx, placement.pyx,
 pedestrians.pyx, samplers.pyx): scratch allocation, the world generator's C interface, output
-fields, grid-cell queries, lane pieces, vehicle sizes and angle wrapping.
+fields, grid-cell queries, vehicle sizes and angle wrapping (the lane-piece search is
+map-level: lanes.pxd).
 
 Every function is inline: each module compiles its own copy, so no candidate loop calls
 across modules.
@@ -13,9 +14,7 @@ from libc.math cimport fmod
 from libc.stdlib cimport malloc
 from numpy.random cimport bitgen_t
 
-ctypedef cnp.float64_t f64
-ctypedef cnp.int64_t i64
-ctypedef cnp.uint64_t u64
+from selfplaydrive._sim.lanes cimport f64, i64, u64
 
 
 cdef inline void* _alloc(size_t nbytes) except NULL:
@@ -53,19 +52,6 @@ cdef inline void* _field(object sc, str name, int typenum, Py_ssize_t size) exce
             f"{getattr(arr, 'dtype', '')} {getattr(arr, 'shape', '')}"
         )
     return cnp.PyArray_DATA(<cnp.ndarray>arr)
-
-
-cdef inline i64 _lane_piece(const f64[::1] gcum, const i64[::1] offsets, i64 ln, double g) noexcept nogil:
-    """Centreline piece of lane `ln` holding flat arc length g: the largest lo with
-    gcum[lo] <= g, within [offsets[ln], offsets[ln + 1] - 2] (binary search)."""
-    cdef i64 lo = offsets[ln], hi = offsets[ln + 1] - 2, mid
-    while lo < hi:
-        mid = (lo + hi + 1) >> 1
-        if gcum[mid] <= g:
-            lo = mid
-        else:
-            hi = mid - 1
-    return lo
 
 
 cdef inline bint _box_cells(const f64[::1] cell_origin, double cell, Py_ssize_t nx, Py_ssize_t ny,
