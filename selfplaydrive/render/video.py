@@ -195,7 +195,7 @@ def render_episode(
 
     from selfplaydrive.builder import make_env
     from selfplaydrive.render.episode import EpisodeRenderer
-    from selfplaydrive.render.policies import make_policy
+    from selfplaydrive.policies import make_policy
     from selfplaydrive.render.record import record_episode
 
     check_output(output)

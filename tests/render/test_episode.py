@@ -12,7 +12,7 @@ from PIL import Image
 
 from selfplaydrive.builder import make_env
 from selfplaydrive.render.episode import LIGHT_COLORS, STATUS_COLORS, EpisodeRenderer, box_corners
-from selfplaydrive.render.policies import infer_model_spec, make_policy
+from selfplaydrive.policies import infer_model_spec, make_policy
 from selfplaydrive.render.record import record_episode
 from selfplaydrive.render.video import has_mp4, png_paths, write_video
 

@@ -99,3 +99,13 @@ def test_format1_env_entry_with_pending_scenario_or_stats(reset_first):
         b.step(x)
         np.testing.assert_array_equal(a.observations, b.observations)
         np.testing.assert_array_equal(a.rewards, b.rewards)
+
+
+def test_observation_width_is_read_from_both_formats():
+    from selfplaydrive.policies import trained_obs_dim
+
+    old = ckpt.load(DATA / "ckpt_format1.pt")
+    env = lane_env(num_worlds=1, seed=0, episode_length=1.5)
+    assert trained_obs_dim(old) == env.layout.obs_dim
+    assert trained_obs_dim({"env": env.get_state()}) == env.layout.obs_dim
+    assert trained_obs_dim({"model": {}}) is None
