@@ -5,6 +5,8 @@ A state is a flat dict of NumPy arrays and Python scalars (so `np.savez(path, **
 
     version: int, `STATE_VERSION`.
     num_worlds, agents_per_world: int, the sizes of the env that wrote it.
+    map_names: (num maps,) str, the env's maps in order; term_names: (M,) str, its reward
+        columns (a reward of the same width but other terms would otherwise pass unnoticed).
     seed: int, the seed `reset(None)` continues from (-1: none, fresh entropy).
     buffers.<name>: every buffer of `VecEnv.buffers` (positions, lights, pedestrians, the
         per-world kernel RNG keys and counters, step counters, episode sums, observations ...).
@@ -63,6 +65,8 @@ def get_state(env: VecEnv) -> dict[str, Any]:
         "version": STATE_VERSION,
         "num_worlds": int(env.num_worlds),
         "agents_per_world": int(env.agents_per_world),
+        "map_names": _names(env)["map_names"],
+        "term_names": _names(env)["term_names"],
         "seed": -1 if env._seed is None else int(env._seed),
         "dropped_episode_stats": int(env.dropped_episode_stats),
         "reward_mask": env.reward_mask.copy(),
@@ -180,6 +184,12 @@ def decode_episode_stats(
     return records
 
 
+def _names(env: VecEnv) -> dict[str, np.ndarray]:
+    """The env's map names and reward column names as str arrays (state fields)."""
+    maps = [m.name for m in env.maps]
+    return {"map_names": np.array(maps, dtype=str), "term_names": np.array(list(env.term_names), dtype=str)}
+
+
 def stat_columns(env: VecEnv) -> dict[str, Sequence[str]]:
     """The column names of the nested values of `env`'s episode records."""
     from selfplaydrive.sim.vec_env import EVER_BITS  # vec_env imports this module when used
@@ -208,6 +218,13 @@ def _validate(env: VecEnv, state: Mapping[str, Any]) -> Scenario | None:
         live = getattr(env, key)
         if key in state and state[key] != live:
             raise ValueError(f"state field {key!r}: {state[key]!r}, this env has {live}: {_SAME_CONFIG}")
+    for key, live_names in _names(env).items():
+        saved = state.get(key)
+        if saved is not None and (not isinstance(saved, np.ndarray) or saved.tolist() != live_names.tolist()):
+            shown = saved.tolist() if isinstance(saved, np.ndarray) else saved
+            raise ValueError(
+                f"state field {key!r}: {shown!r}, this env has {live_names.tolist()!r}: {_SAME_CONFIG}"
+            )
     spec = _spec(env)
     pending_keys = {k for k in state if k.startswith("pending.")}
     missing = sorted(set(spec) - set(state))
@@ -225,6 +242,7 @@ def _spec(env: VecEnv) -> dict[str, tuple[tuple[int | None, ...], np.dtype] | ty
     W, N = env.num_worlds, env.num_agents
     spec: dict[str, Any] = dict.fromkeys(_SCALARS, int)
     spec["reset_pending"] = bool
+    spec.update({k: (v.shape, v.dtype) for k, v in _names(env).items()})  # values checked above
     spec.update({f"buffers.{n}": (a.shape, a.dtype) for n, a in env.buffers.items()})
     spec["reward_mask"] = ((N,), np.dtype(bool))
     spec["rng.pcg64"] = ((W, 4), np.dtype(np.uint64))

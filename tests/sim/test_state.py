@@ -121,6 +121,11 @@ def test_bad_states_name_the_field(stepped):
         "unknown": (dict(good, extra=1), r"unknown field\(s\) \['extra'\]"),
         "scalar": (dict(good, seed="zero"), "'seed': expected a int"),
         "worlds": (dict(good, num_worlds=5), "'num_worlds': 5, this env has 3"),
+        "terms": (
+            dict(good, term_names=good["term_names"][::-1].copy()),
+            r"'term_names': \['velocity', .*, this env has \['waypoint'",
+        ),
+        "maps": (dict(good, map_names=np.array(["elsewhere"])), r"'map_names': \['elsewhere'\]"),
     }
     for name, (bad, message) in cases.items():
         with pytest.raises(ValueError, match=message):

@@ -69,6 +69,8 @@ def _env_state_from_v1(env, old: dict[str, object]) -> dict[str, object]:
         # format 1 kept no sizes: the buffer shapes are checked against this env instead
         "num_worlds": env.num_worlds,
         "agents_per_world": env.agents_per_world,
+        "map_names": np.array([m.name for m in env.maps], dtype=str),
+        "term_names": np.array(list(env.term_names), dtype=str),
         "seed": -1 if seed is None else int(seed),
         "dropped_episode_stats": int(py.get("dropped_episode_stats", 0)),
         "reward_mask": old["reward_mask"],
