@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from selfplaydrive._sim.waypoints import RouteKernel
+from selfplaydrive._sim.chunks import ChunkKernel
 
 _F64 = NDArray[np.float64]
 _I64 = NDArray[np.int64]
@@ -19,11 +19,6 @@ _Bool = NDArray[np.bool_]
 def greedy_select(
     xy: _F64, radius: _F64, need: int, fixed_xy: _F64, fixed_radius: _F64, gap: float
 ) -> _I64: ...
-
-class ChunkKernel:
-    def __init__(self, chunks: Any, routes: RouteKernel) -> None: ...
-    def poses(self, box: _F64, u: _F64) -> tuple[_I64, _F64, _F64, _F64, _I64]: ...
-
 def aligned_candidates(
     lane: _I64,
     s: _F64,

@@ -1,8 +1,9 @@
 # cython: language_level=3
-"""Agent and static-vehicle placement (paper section 2.2): `ChunkKernel` draws poses on a set of
-lane chunks (spawn or roadside), `Placer` places a world's agents and static vehicles one
-candidate at a time from the world's generator (its bit generator's `next_double`: the values
-`rng.random` would give), so a reset computes only the candidates it tries. NumPy references
+"""Agent and static-vehicle placement (paper section 2.2): `Placer` places a world's agents and
+static vehicles on poses that `ChunkKernel` (_sim/chunks.pyx) draws on the spawn and roadside
+lane chunks, one candidate at a time from the world's generator (its bit generator's
+`next_double`: the values `rng.random` would give), so a reset computes only the candidates it
+tries. NumPy references
 with the same semantics and draws are in `selfplaydrive/testing/spawn_reference.py`; the tests
 compare them bit for bit.
 """
@@ -14,9 +15,9 @@ from libc.math cimport cos, fabs, hypot, sin
 from libc.stdlib cimport free
 from numpy.random cimport bitgen_t
 from selfplaydrive._sim.spawn_common cimport (
-    f64, i64, _alloc, _bitgen, _box_cells, _box_count, _draw, _field, _size, _wrap_angle,
+    f64, i64, _alloc, _bitgen, _draw, _field, _size, _wrap_angle,
 )
-from selfplaydrive._sim.lanes cimport _lane_piece
+from selfplaydrive._sim.chunks cimport ChunkKernel, Pose
 from selfplaydrive._sim.waypoints cimport RouteKernel
 
 cnp.import_array()
@@ -63,132 +64,6 @@ def greedy_select(
                 if m >= need:
                     break
     return out[:m]
-
-
-cdef struct Pose:
-    # a pose drawn on a chunk: chunk, lane, centreline piece (index of its heading), arc length
-    # on the lane [m], point on the centreline [m]
-    i64 chunk
-    i64 lane
-    i64 piece
-    double s
-    double x
-    double y
-
-
-cdef class ChunkKernel:
-    """One `scenario.index.Chunks` set (and its map's route tables) bound once as typed views:
-    `gather` lists the chunks whose midpoint lies in a box with their cumulative lengths, `pose`
-    turns two uniforms into a pose on them; `poses` runs both for n draws (its NumPy twin is
-    `testing.spawn_reference.sample_on_chunks_reference`)."""
-
-    cdef const f64[::1] cell_origin, chunk_s0, chunk_s1, edge, sorted_len
-    cdef double cell
-    cdef Py_ssize_t nx, ny
-    cdef const i64[::1] cell_offsets, cell_items, chunk_lane
-    cdef const f64[:, ::1] mid, sorted_mid
-    cdef RouteKernel r
-
-    def __init__(self, chunks, RouteKernel routes):
-        cells = chunks.cells
-        self.cell_origin = np.ascontiguousarray(cells.origin, dtype=np.float64)
-        self.cell = float(cells.cell)
-        self.nx = int(cells.shape[0])
-        self.ny = int(cells.shape[1])
-        self.cell_offsets = cells.offsets
-        self.cell_items = cells.items
-        self.mid = cells.xy
-        self.chunk_lane = chunks.lane
-        self.chunk_s0 = chunks.s0
-        self.chunk_s1 = chunks.s1
-        self.edge = np.ascontiguousarray(chunks.edge, dtype=np.float64)
-        # midpoints and lengths in cell order, so `gather` reads them contiguously
-        self.sorted_mid = np.ascontiguousarray(np.asarray(cells.xy)[cells.items], dtype=np.float64)
-        self.sorted_len = np.ascontiguousarray((chunks.s1 - chunks.s0)[cells.items], dtype=np.float64)
-        self.r = routes
-
-    cdef Py_ssize_t count(self, const f64[::1] box) noexcept:
-        """Room `gather` needs for `box` (the chunks in the cells that meet it)."""
-        return _box_count(self.cell_origin, self.cell, self.nx, self.ny, self.cell_offsets, box)
-
-    cdef Py_ssize_t gather(self, const f64[::1] box, i64* ids, f64* cdf) noexcept:
-        """The chunks whose midpoint lies in `box` (`CellIndex.query_box`, cell order) into ids
-        and their cumulative lengths [m] into cdf (room for `count(box)` entries each); returns
-        their number."""
-        cdef Py_ssize_t r[4]
-        cdef Py_ssize_t i, c, n = 0
-        cdef double total = 0.0
-        if not _box_cells(self.cell_origin, self.cell, self.nx, self.ny, box, r):
-            return 0
-        for i in range(r[0], r[2] + 1):
-            for c in range(self.cell_offsets[i * self.ny + r[1]], self.cell_offsets[i * self.ny + r[3] + 1]):
-                if box[0] <= self.sorted_mid[c, 0] <= box[2] and box[1] <= self.sorted_mid[c, 1] <= box[3]:
-                    ids[n] = self.cell_items[c]
-                    total += self.sorted_len[c]
-                    cdf[n] = total
-                    n += 1
-        return n
-
-    cdef bint pose(self, const i64* ids, const f64* cdf, Py_ssize_t n, const f64[::1] box,
-                   double u0, double u1, Pose* p) noexcept:
-        """The pose of draw (u0, u1) on the n > 0 gathered chunks: u0 picks a chunk with
-        probability proportional to its length (the first whose cumulative length exceeds
-        u0 * total), u1 the arc length inside it; False when the point lies outside `box`."""
-        cdef RouteKernel r = self.r
-        cdef i64 lo = 0, hi = n - 1, md, ch, ln
-        cdef double target = u0 * cdf[n - 1], g, f
-        while lo < hi:
-            md = (lo + hi) >> 1
-            if cdf[md] > target:
-                hi = md
-            else:
-                lo = md + 1
-        ch = ids[lo]
-        ln = self.chunk_lane[ch]
-        p.chunk = ch
-        p.lane = ln
-        p.s = self.chunk_s0[ch] + u1 * (self.chunk_s1[ch] - self.chunk_s0[ch])
-        g = r.base[ln] + p.s
-        lo = _lane_piece(r.gcum, r.offsets, ln, g)
-        p.piece = lo
-        f = (g - r.gcum[lo]) / (r.gcum[lo + 1] - r.gcum[lo])
-        p.x = r.px[lo] + f * (r.px[lo + 1] - r.px[lo])
-        p.y = r.py[lo] + f * (r.py[lo + 1] - r.py[lo])
-        return box[0] <= p.x <= box[2] and box[1] <= p.y <= box[3]
-
-    def poses(self, const f64[::1] box, const f64[:, ::1] u):
-        """(lane, s, xy, heading, chunk) of the poses drawn with u (n, 2) (`pose` of each row)
-        that lie in `box`."""
-        cdef Py_ssize_t n = u.shape[0], m = 0, q, n_ids, k = self.count(box)
-        cdef Pose p
-        lane_arr = np.empty(n, dtype=np.int64)
-        s_arr = np.empty(n)
-        xy_arr = np.empty((n, 2))
-        h_arr = np.empty(n)
-        chunk_arr = np.empty(n, dtype=np.int64)
-        cdef i64[::1] lane = lane_arr, chunk = chunk_arr
-        cdef f64[::1] s = s_arr, h = h_arr
-        cdef f64[:, ::1] xy = xy_arr
-        cdef i64* ids
-        cdef f64* cdf
-        if n > 0 and k > 0:
-            ids = <i64*>_alloc(k * sizeof(i64))
-            cdf = <f64*>_alloc(k * sizeof(f64))
-            try:
-                n_ids = self.gather(box, ids, cdf)
-                for q in range(n if n_ids > 0 else 0):
-                    if self.pose(ids, cdf, n_ids, box, u[q, 0], u[q, 1], &p):
-                        lane[m] = p.lane
-                        s[m] = p.s
-                        xy[m, 0] = p.x
-                        xy[m, 1] = p.y
-                        h[m] = self.r.heading[p.piece]
-                        chunk[m] = p.chunk
-                        m += 1
-            finally:
-                free(ids)
-                free(cdf)
-        return lane_arr[:m], s_arr[:m], xy_arr[:m], h_arr[:m], chunk_arr[:m]
 
 
 # columns of the spawner's agent rows (`scenario.spawner.AGENT_COLUMNS`)

@@ -265,7 +265,7 @@ class MapIndex:
     @cached_property
     def kernels(self) -> SpawnKernels:
         """The index's arrays bound once to the Cython kernels of a world reset."""
-        from selfplaydrive._sim.placement import ChunkKernel
+        from selfplaydrive._sim.chunks import ChunkKernel
         from selfplaydrive._sim.waypoints import RouteKernel
 
         lanes = self.road_map.lanes
@@ -276,7 +276,7 @@ class MapIndex:
 @dataclass(frozen=True)
 class SpawnKernels:
     """`MapIndex.kernels`: route walks and waypoints (`routes`), pose draws on the spawn and
-    roadside chunks (`_sim/waypoints.pyx` `RouteKernel`, `_sim/placement.pyx` `ChunkKernel`)."""
+    roadside chunks (`_sim/waypoints.pyx` `RouteKernel`, `_sim/chunks.pyx` `ChunkKernel`)."""
 
     routes: object
     spawn: object
@@ -288,7 +288,7 @@ class SpawnKernels:
             return self.spawn
         if chunks is index.roadside:
             return self.roadside
-        from selfplaydrive._sim.placement import ChunkKernel
+        from selfplaydrive._sim.chunks import ChunkKernel
 
         return ChunkKernel(chunks, self.routes)
 

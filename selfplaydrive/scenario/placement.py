@@ -80,7 +80,7 @@ def sample_on_chunks(
     """Up to `n` poses uniform over the length of the chunks whose midpoint lies in `box`; poses
     outside `box` are dropped (chunks at the border stick out by up to half a chunk).
 
-    Runs the fused Cython kernel `_sim.placement.ChunkKernel.poses` (`sample_chunk_poses` on
+    Runs the fused Cython kernel `_sim.chunks.ChunkKernel.poses` (`sample_chunk_poses` on
     tables bound once per map); the NumPy twin is
     `testing.spawn_reference.sample_on_chunks_reference`. Draws (n, 2) uniforms from `rng`.
     """
