@@ -134,3 +134,56 @@ def test_bad_states_name_the_field(stepped):
             np.testing.assert_array_equal(stepped.get_state()[key], value, err_msg=f"{name}: {key}")
     with pytest.raises(ValueError, match=r"expected the dict of VecEnv\.get_state"):
         stepped.set_state([1, 2])
+
+
+class SpeedTerm:
+    """A Python reward term (runs after the kernels)."""
+
+    name = "speed_term"
+
+    def __call__(self, state):
+        return np.float32(0.01) * state.speed
+
+
+class SpeedFeature:
+    """A Python observation hook (one extra column)."""
+
+    name = "speed_feature"
+    dim = 1
+
+    def __call__(self, state):
+        return (state.speed / np.float32(40.0)).reshape(-1, 1).astype(np.float32)
+
+
+def test_restore_with_python_components_external_physics_and_continuous_actions():
+    pymunk_model = pytest.importorskip("selfplaydrive.physics").PymunkModel
+    pytest.importorskip("pymunk")
+    from selfplaydrive.rewards import TERM_NAMES, LinearReward
+    from selfplaydrive.sim import ContinuousActions
+
+    def build(seed: int) -> VecEnv:
+        return VecEnv(
+            load_map("default"),
+            PaperSpawner(num_agents=6, episode_lengths=(2.0,)),
+            2,
+            physics=pymunk_model(),
+            actions=ContinuousActions(),
+            seed=seed,
+            terminated_vehicle="obstacle",
+            reward=LinearReward({**dict.fromkeys(TERM_NAMES, 1.0), "speed_term": 0.5}, terms=[SpeedTerm()]),
+            obs_hooks=[SpeedFeature()],
+        )
+
+    env = build(0)
+    env.reset(0)
+    rng = np.random.default_rng(8)
+    acts = np.stack(
+        [rng.uniform(-2, 3, (40, env.num_agents)), rng.uniform(-0.3, 0.3, (40, env.num_agents))], -1
+    )
+    acts = acts.astype(np.float32)
+    run(env, acts[:12])
+    state = env.get_state()
+    first = run(env, acts[12:])
+    fresh = build(1)
+    fresh.set_state(state)
+    assert_same(first, run(fresh, acts[12:]))
