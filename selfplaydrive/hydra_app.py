@@ -6,14 +6,17 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 from selfplaydrive.builder import CONFIG_MODULE, compose
 from selfplaydrive.errors import CheckpointError, ConfigError, MapError, MissingExtraError
+
+# run-folder helpers live in runs.py (eval/app.py and the trainers use them too); the names
+# stay importable from here
+from selfplaydrive.runs import git_commit as git_commit
+from selfplaydrive.runs import write_run_meta
 
 # Hydra's own command-line flags (hydra/_internal/utils.py get_args_parser)
 HYDRA_FLAGS = {
@@ -110,38 +113,6 @@ def check_overrides(config_name: str, argv: Sequence[str]) -> None:
             value = ov.get_value_element_as_str()
         first.append(f"{key}={value}")
     check_config(config_name, compose(config_name, first))
-
-
-def git_commit() -> str:
-    """The commit of the selfplaydrive checkout ('unknown' outside a git checkout)."""
-    root = Path(__file__).resolve().parents[1]
-    try:
-        out = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
-        )
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return out.stdout.strip() if out.returncode == 0 else "unknown"
-
-
-def write_run_meta(cfg: Any) -> Path:
-    """Write resolved_config.yaml and run_meta.json (commit, seed, overrides) into the run folder."""
-    from hydra.core.hydra_config import HydraConfig
-    from omegaconf import OmegaConf
-
-    hc = HydraConfig.get()
-    run_dir = Path(hc.runtime.output_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "resolved_config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
-    meta = {
-        "git_commit": git_commit(),
-        "seed": int(cfg.seed),
-        "overrides": list(hc.overrides.task),
-        "choices": {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")},
-        "command": " ".join(sys.argv),
-    }
-    (run_dir / "run_meta.json").write_text(json.dumps(meta, indent=2))
-    return run_dir
 
 
 def run_hydra(

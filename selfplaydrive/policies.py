@@ -244,8 +244,12 @@ def trained_obs_dim(payload: Mapping[str, Any]) -> int | None:
     """Width of the observation rows the checkpoint's env produced, or None when the payload
     holds no env state (a checkpoint saved with the model only)."""
     env = payload.get("env")
-    buffers = env.get("buffers") if isinstance(env, Mapping) else None
-    obs = buffers.get("obs") if isinstance(buffers, Mapping) else None
+    if not isinstance(env, Mapping):
+        return None
+    obs = env.get("buffers.obs")  # `VecEnv.get_state()` (checkpoint format 2)
+    if obs is None:  # format 1: the buffers as a nested dict
+        buffers = env.get("buffers")
+        obs = buffers.get("obs") if isinstance(buffers, Mapping) else None
     shape = getattr(obs, "shape", None)
     return int(shape[-1]) if shape is not None and len(shape) == 2 else None
 

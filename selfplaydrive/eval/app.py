@@ -306,7 +306,7 @@ def _suite_summaries(result: dict[str, Any]) -> dict[str, Any]:
 
 def eval_task(cfg: Any) -> dict[str, Any]:
     """Hydra task of `selfplaydrive eval`."""
-    from selfplaydrive.hydra_app import write_run_meta
+    from selfplaydrive.runs import write_run_meta
 
     run_dir = write_run_meta(cfg)
     written = run_eval(cfg, run_dir)

@@ -146,7 +146,7 @@ class RouteTables:
         Returns:
             xy: (n, 2) float64 [m]; heading: (n,) float64 [rad] of the centerline there.
         """
-        from selfplaydrive._sim.spawn import lane_points
+        from selfplaydrive._sim.lanes import lane_points
 
         lane = np.ascontiguousarray(lane, dtype=np.int64)
         xy = np.empty((len(lane), 2))
@@ -258,7 +258,7 @@ def sample_routes(
     lane_change_prob: float = 0.1,
     max_pieces: int = 128,
 ) -> RouteBatch:
-    """Random legal routes for several agents at once (Cython kernel `_sim.spawn.walk_routes`).
+    """Random legal routes for several agents at once (Cython kernel `_sim.lanes.walk_routes`).
 
     Each step either follows a uniformly chosen successor to the end of the current lane, or,
     with probability `lane_change_prob` where a legal change exists, the previous step was no
@@ -279,7 +279,7 @@ def sample_routes(
     Returns:
         The `RouteBatch`.
     """
-    from selfplaydrive._sim.spawn import walk_routes
+    from selfplaydrive._sim.lanes import walk_routes
 
     a = len(start_lane)
     key = int(rng.integers(0, 2**63))
@@ -336,7 +336,7 @@ def waypoint_times(rng: np.random.Generator, a: int, k: int, spacing_s: float, j
 def batch_waypoints(
     tables: RouteTables, routes: RouteBatch, times: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Waypoints at the given route times (Cython kernel `_sim.spawn.route_waypoints_batch`).
+    """Waypoints at the given route times (Cython kernel `_sim.lanes.route_waypoints_batch`).
 
     A waypoint exists where its time is within the route's duration. Where not even the first
     fits (a route that dead-ends early), the route's end becomes the single waypoint, so every
@@ -351,7 +351,7 @@ def batch_waypoints(
         waypoints: (A, K, 2) float32 [m], padded with the last valid one.
         count: (A,) int32 number of valid waypoints (1..K).
     """
-    from selfplaydrive._sim.spawn import route_waypoints_batch
+    from selfplaydrive._sim.lanes import route_waypoints_batch
 
     a, k = times.shape
     xy = np.empty((a, k, 2), dtype=np.float32)

@@ -228,7 +228,7 @@ def record_episode(
 
     Args:
         env: A `VecEnv`. Its spawner is wrapped in a `ScenarioLog` (kept afterwards).
-        policy: `policy(observations, env) -> (N, 2)` actions (`render/policies.py`); an
+        policy: `policy(observations, env) -> (N, 2)` actions (`selfplaydrive/policies.py`); an
             optional `reset()` method is called after the env's reset.
         steps: Env steps to take (>= 0); the recording has `steps + 1` frames.
         world: The world to record, in [0, env.num_worlds).

@@ -194,8 +194,8 @@ def render_episode(
     import time
 
     from selfplaydrive.builder import make_env
+    from selfplaydrive.policies import make_policy
     from selfplaydrive.render.episode import EpisodeRenderer
-    from selfplaydrive.render.policies import make_policy
     from selfplaydrive.render.record import record_episode
 
     check_output(output)

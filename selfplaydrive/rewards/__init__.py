@@ -2,6 +2,7 @@
 forms of a term (compiled `KernelTerm` from numba or Cython, Python `RewardHook`); see
 docs/components.md "Write a reward term"."""
 
+from selfplaydrive.rewards.base import RewardHook, RewardModule
 from selfplaydrive.rewards.components import (
     ABI_VERSION,
     SIGNATURE,
@@ -13,7 +14,7 @@ from selfplaydrive.rewards.components import (
     register_term,
     registered_terms,
 )
-from selfplaydrive.rewards.registry import TERM_NAMES, TERMS, RewardHook, RewardTerm
+from selfplaydrive.rewards.registry import TERM_NAMES, TERMS, RewardTerm
 
 __all__ = [
     "ABI_VERSION",
@@ -23,6 +24,7 @@ __all__ = [
     "KernelTerm",
     "LinearReward",
     "RewardHook",
+    "RewardModule",
     "RewardTerm",
     "TermColumn",
     "describe_terms",

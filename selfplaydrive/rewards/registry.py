@@ -1,17 +1,16 @@
 """The eight reward terms of section 2.3, in their default column order of the per-term buffer.
 
 The kernels compute them (_sim/reward.pyx, as components of the ABI in selfplaydrive_abi.h);
-this module names and documents them, and `RewardHook` is the contract of terms written in
-Python, which run after the kernels on read-only views. rewards/components.py holds the
-registry of selectable terms and `LinearReward`.
+this module names and documents them. `RewardHook`, the contract of terms written in Python
+(run after the kernels on read-only views), lives in rewards/base.py and is importable from
+here as before. rewards/components.py holds the registry of selectable terms and `LinearReward`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
 
-import numpy as np
+from selfplaydrive.rewards.base import RewardHook as RewardHook  # its home before rewards/base.py
 
 # Per-episode event counters of `VecEnv.pop_episode_stats()` (the kernels' `ev_count` order);
 # pure Python so a saved recording can be drawn without the simulator.
@@ -49,19 +48,3 @@ TERMS = (
     RewardTerm("velocity", "R = 2.5e-4 max(cos alpha, 0)", "v >= 2.5 m/s and a lane is associated"),
 )
 TERM_NAMES = tuple(t.name for t in TERMS)
-
-
-class RewardHook(Protocol):
-    """A reward term computed in Python after the kernels (the Python form of a term; it may
-    replace a registered term of the same name in a `LinearReward`).
-
-    Attributes:
-        name: Column name in `VecEnv.term_names` / `reward_terms` and in the episode statistics.
-    """
-
-    name: str
-
-    def __call__(self, state: object) -> np.ndarray:
-        """Return the (num_agents,) float32 term from read-only views of the env state
-        (`VecEnv.state`: arrays named as in sim/buffers.py). Rows of inactive slots are ignored."""
-        ...

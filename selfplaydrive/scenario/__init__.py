@@ -4,6 +4,7 @@
 see docs/scenario.md.
 """
 
+from selfplaydrive.scenario.base import Spawner
 from selfplaydrive.scenario.conditioning import ConditioningSampler, HiddenParamSampler
 from selfplaydrive.scenario.index import MapIndex, map_index
 from selfplaydrive.scenario.lights import LightSampler
@@ -22,6 +23,7 @@ __all__ = [
     "PaperSpawner",
     "PedestrianSampler",
     "Scenario",
+    "Spawner",
     "VehicleSizeSampler",
     "map_index",
 ]

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import bimodal_uniform
+from selfplaydrive._sim.samplers import bimodal_uniform
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS
 

@@ -110,8 +110,8 @@ class Crossings:
 
     @cached_property
     def kernel(self) -> object:
-        """The arrays bound once to the pedestrian kernels (`_sim.spawn.CrossingKernel`)."""
-        from selfplaydrive._sim.spawn import CrossingKernel
+        """The arrays bound once to the pedestrian kernels (`_sim.pedestrians.CrossingKernel`)."""
+        from selfplaydrive._sim.pedestrians import CrossingKernel
 
         return CrossingKernel(self)
 
@@ -265,7 +265,8 @@ class MapIndex:
     @cached_property
     def kernels(self) -> SpawnKernels:
         """The index's arrays bound once to the Cython kernels of a world reset."""
-        from selfplaydrive._sim.spawn import ChunkKernel, RouteKernel
+        from selfplaydrive._sim.chunks import ChunkKernel
+        from selfplaydrive._sim.waypoints import RouteKernel
 
         lanes = self.road_map.lanes
         routes = RouteKernel(self.routes, lanes.width, lanes.speed_limit)
@@ -275,7 +276,7 @@ class MapIndex:
 @dataclass(frozen=True)
 class SpawnKernels:
     """`MapIndex.kernels`: route walks and waypoints (`routes`), pose draws on the spawn and
-    roadside chunks (`_sim/spawn.pyx` `RouteKernel`, `ChunkKernel`)."""
+    roadside chunks (`_sim/waypoints.pyx` `RouteKernel`, `_sim/chunks.pyx` `ChunkKernel`)."""
 
     routes: object
     spawn: object
@@ -287,7 +288,7 @@ class SpawnKernels:
             return self.spawn
         if chunks is index.roadside:
             return self.roadside
-        from selfplaydrive._sim.spawn import ChunkKernel
+        from selfplaydrive._sim.chunks import ChunkKernel
 
         return ChunkKernel(chunks, self.routes)
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import pedestrian_batch
+from selfplaydrive._sim.pedestrians import pedestrian_batch
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.index import Crossings
 

@@ -7,7 +7,7 @@ distance to everything accepted before it. The pass is bounded by the number of 
 drawn, so infeasible settings end with fewer vehicles instead of looping.
 
 `PaperSpawner` runs these rules candidate by candidate inside one kernel call
-(`_sim.spawn.Placer`, on the same `ChunkKernel.pose`); `sample_on_chunks` and
+(`_sim.placement.Placer`, on the same `ChunkKernel.pose`); `sample_on_chunks` and
 `greedy_separated` are the batch forms, for other placements and the tests.
 """
 
@@ -80,7 +80,7 @@ def sample_on_chunks(
     """Up to `n` poses uniform over the length of the chunks whose midpoint lies in `box`; poses
     outside `box` are dropped (chunks at the border stick out by up to half a chunk).
 
-    Runs the fused Cython kernel `_sim.spawn.ChunkKernel.poses` (`sample_chunk_poses` on
+    Runs the fused Cython kernel `_sim.chunks.ChunkKernel.poses` (`sample_chunk_poses` on
     tables bound once per map); the NumPy twin is
     `testing.spawn_reference.sample_on_chunks_reference`. Draws (n, 2) uniforms from `rng`.
     """
@@ -99,7 +99,7 @@ def greedy_separated(
     gap: float = 0.0,
 ) -> np.ndarray:
     """Greedy selection of candidates that keep apart from each other and from fixed objects
-    (Cython kernel `_sim.spawn.greedy_select`; NumPy twin
+    (Cython kernel `_sim.placement.greedy_select`; NumPy twin
     `testing.spawn_reference.greedy_separated_reference`).
 
     Args:
@@ -113,7 +113,7 @@ def greedy_separated(
     Returns:
         (m,) int64 accepted candidate indices, m <= need, in acceptance order.
     """
-    from selfplaydrive._sim.spawn import greedy_select
+    from selfplaydrive._sim.placement import greedy_select
 
     fx = (
         np.zeros((0, 2))

@@ -10,7 +10,7 @@ the same seed gives the same `Scenario`):
    are aligned: on a vehicle lane outside junctions, heading = lane direction + U(-h, h),
    lateral shift U(-l, l) (kept inside the lane), speed U(initial_speed) capped by the lane's
    speed limit. Any two agents are at least `min_agent_distance` (15 m) apart (box centres).
-   Candidates are drawn one at a time and accepted greedily (`_sim.spawn.Placer.agents`); their
+   Candidates are drawn one at a time and accepted greedily (`_sim.placement.Placer.agents`); their
    number is bounded (`candidates_per_agent` per wanted agent; the aligned agents' first
    `first_round_candidates` per agent are drawn in one block), so infeasible settings never
    hang: the world gets fewer agents and a `UserWarning` names the shortfall (once per spawner
@@ -23,7 +23,7 @@ the same seed gives the same `Scenario`):
    or each other (bounding circles + `static_gap`), out of the lane space right ahead of every
    agent (its box grown by `static_gap`, stretched forward by `STATIC_CLEAR_AHEAD` = 5 m plus
    the distance it covers in `STATIC_HEADWAY` = 1 s), each leaving at least
-   `min_free_lane_width` of its lane free (`_sim.spawn.Placer.statics`).
+   `min_free_lane_width` of its lane free (`_sim.placement.Placer.statics`).
 5. Pedestrians crossing at crosswalks and elsewhere (`PedestrianSampler`).
 6. Traffic lights (`LightSampler`), episode length from `episode_lengths`, per-agent reward
    coefficients (`ConditioningSampler`) and hidden dynamics parameters (`HiddenParamSampler`).
@@ -37,7 +37,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import Placer
+from selfplaydrive._sim.placement import Placer
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.maps.routing import MIN_CHANGE_LENGTH
@@ -51,7 +51,7 @@ from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
 # pieces per route at most (the default of `maps.routing.sample_routes`)
 MAX_ROUTE_PIECES = 128
-# columns of the placement kernel's agent rows (`_sim.spawn.Placer`, its NumPy reference)
+# columns of the placement kernel's agent rows (`_sim.placement.Placer`, its NumPy reference)
 AGENT_COLUMNS = ("lane", "s", "x", "y", "heading", "speed", "length", "width", "parked", "on_lane")
 # A static vehicle keeps out of the lane space ahead of each agent: STATIC_CLEAR_AHEAD m (one
 # car length) plus the distance the agent covers in STATIC_HEADWAY s at its initial speed, so
@@ -278,7 +278,7 @@ class PaperSpawner:
         self, sc: Scenario, index: MapIndex, box: np.ndarray, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         """Place parked then aligned agents, 15 m apart, into the agent slots of `sc`
-        (`_sim.spawn.Placer.agents`); returns each agent's route start: lane (n,) int64 and
+        (`_sim.placement.Placer.agents`); returns each agent's route start: lane (n,) int64 and
         arc length (n,) float64 [m], in slot order."""
         want = self.num_agents
         n_parked = int(rng.binomial(want, self.parked_share))
@@ -315,7 +315,7 @@ class PaperSpawner:
         """Random legal routes from (lane, s) and up to K waypoints along them (section 2.2):
         `maps.routing.waypoint_times`, the key `sample_routes` draws, `sample_routes` and
         `batch_waypoints` (same draws, same results) fused in one kernel call
-        (`_sim.spawn.RouteKernel.draw_waypoints`)."""
+        (`_sim.waypoints.RouteKernel.draw_waypoints`)."""
         index.kernels.routes.draw_waypoints(
             rng,
             lane,
@@ -336,7 +336,7 @@ class PaperSpawner:
         self, sc: Scenario, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n_agents: int
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Up to `static_count` stationary vehicles at the roadside, clear of every agent
-        (`_sim.spawn.Placer.statics`). Returns every vehicle of the world (agents, then static
+        (`_sim.placement.Placer.statics`). Returns every vehicle of the world (agents, then static
         vehicles): centres (n, 2) [m], bounding-circle radii (n,) [m] and whether each stands
         still (parked agent or static vehicle), for the pedestrians."""
         lo, hi = self.static_count

@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from selfplaydrive._sim.spawn import vehicle_sizes
+from selfplaydrive._sim.samplers import vehicle_sizes
 from selfplaydrive.errors import ConfigError
 
 MAX_WIDTH = 2.55  # [m] EU limit for road vehicles (Directive 96/53/EC)

@@ -427,6 +427,30 @@ class VecEnv:
     def stage_names(self) -> tuple[str, ...]:
         return (*STAGES, "reset")
 
+    # saving and restoring a rollout (the format: sim/state.py) ----------------------------------
+    def get_state(self) -> dict[str, Any]:
+        """Copy of everything that changes while the env runs: buffers, per-world generators,
+        step counters, unpopped episode statistics (a flat dict of NumPy arrays and Python
+        scalars with a `version`; sim/state.py lists the fields).
+
+        `set_state` of it, here or in an env built from the same configuration, continues the
+        rollout bit for bit. `np.savez(path, **state)` stores it; `dict(np.load(path))` reads it.
+        """
+        from selfplaydrive.sim import state
+
+        return state.get_state(self)
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Continue from `get_state()`'s output; nothing changes when this raises.
+
+        Raises:
+            ValueError: Another version, or a field missing, unknown or of another shape or
+                dtype than this env's (the message names the field).
+        """
+        from selfplaydrive.sim import state as state_format
+
+        state_format.set_state(self, state)
+
 
 def _reward(reward: object) -> LinearReward:
     if reward is None:

@@ -1,4 +1,5 @@
-"""NumPy references of the spawner kernels in `selfplaydrive/_sim/spawn.pyx` (paper section 2.2).
+"""NumPy references of the spawner kernels in `selfplaydrive/_sim/` (lanes, waypoints, placement,
+pedestrians and samplers .pyx; paper section 2.2).
 
 Each function states the same rule as its kernel with plain vectorised NumPy; the tests
 (tests/maps/test_routing.py, tests/scenario/test_index_parts.py) check that kernel and reference
@@ -224,7 +225,7 @@ def pedestrian_paths_reference(
     clear_r: np.ndarray,
     still: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """NumPy reference of the pedestrian kernel `_sim.spawn.pedestrian_paths` (with the site
+    """NumPy reference of the pedestrian kernel `_sim.pedestrians.pedestrian_paths` (with the site
     query `pedestrian_sites`): for draws u (n, 9), the (n, 3, 2) paths (approach point,
     crossing start, crossing end) and (n,) ok: the first point keeps clear_r from every
     vehicle centre (squared distances compared) and no leg passes within clear_r of a vehicle
@@ -271,7 +272,7 @@ def pedestrian_paths_reference(
 def vehicle_sizes_reference(
     u: np.ndarray, cdf: np.ndarray, length: np.ndarray, width: np.ndarray, jitter: float, max_width: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """NumPy reference of `_sim.spawn.vehicle_sizes` (`VehicleSizeSampler.sample` after its
+    """NumPy reference of `_sim.samplers.vehicle_sizes` (`VehicleSizeSampler.sample` after its
     (3, n) draw): category, then jittered length and capped width."""
     cat = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(cdf) - 1)
     j = jitter
@@ -296,7 +297,7 @@ def aligned_candidates_reference(
     heading_noise: float,
     speed: tuple[float, float],
 ) -> np.ndarray:
-    """NumPy reference of `_sim.spawn.aligned_candidates`: (n, 10) agent rows (lane, s, x, y,
+    """NumPy reference of `_sim.placement.aligned_candidates`: (n, 10) agent rows (lane, s, x, y,
     heading, speed, length, width, parked, on lane) of aligned candidates."""
     from selfplaydrive.scenario.placement import offset_right, wrap_angle
 
@@ -330,7 +331,7 @@ def roadside_poses_reference(
     max_shoulder: float,
     min_free: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """NumPy reference of `_sim.spawn.roadside_poses`: centres, offsets and the free-lane test
+    """NumPy reference of `_sim.placement.roadside_poses`: centres, offsets and the free-lane test
     of vehicles parked at the roadside (`roadside_offset` then `offset_right`)."""
     from selfplaydrive.scenario.placement import offset_right, roadside_offset
 
@@ -351,7 +352,7 @@ def bimodal_uniform_reference(
     a_range: tuple[float, float],
     p_a: float,
 ) -> np.ndarray:
-    """NumPy reference of `_sim.spawn.bimodal_uniform` (`ConditioningSampler.sample` after
+    """NumPy reference of `_sim.samplers.bimodal_uniform` (`ConditioningSampler.sample` after
     its draw): per-agent ranges, columns c and a switched to their low mode by the last two
     columns of u, then lo + (hi - lo) u as float32."""
     k = len(lo)
@@ -374,7 +375,7 @@ def pedestrian_batch_reference(
     vehicle_radius: np.ndarray,
     stationary: np.ndarray,
 ) -> PedestrianBatch:
-    """NumPy reference of `PedestrianSampler.sample` (kernel `_sim.spawn.pedestrian_batch`):
+    """NumPy reference of `PedestrianSampler.sample` (kernel `_sim.pedestrians.pedestrian_batch`):
     the count draw, the sites, one (want, 9) draw when there are any, paths and clearance
     tests (`pedestrian_paths_reference`), the kept pedestrians in order."""
     from selfplaydrive.scenario.pedestrians import PATH_POINTS
@@ -411,7 +412,7 @@ def pedestrian_batch_reference(
 def waypoint_draws_reference(
     rng: np.random.Generator, a: int, k: int, spacing: float, jitter: float
 ) -> tuple[np.ndarray, int]:
-    """The draws of `_sim.spawn.RouteKernel.draw_waypoints` made with NumPy's own calls:
+    """The draws of `_sim.waypoints.RouteKernel.draw_waypoints` made with NumPy's own calls:
     (`maps.routing.waypoint_times(rng, a, k, spacing, jitter)`, `rng.integers(0, 2**63)`)."""
     from selfplaydrive.maps.routing import waypoint_times
 
@@ -419,7 +420,7 @@ def waypoint_draws_reference(
     return times, int(rng.integers(0, 2**63))
 
 
-# -- agent and static-vehicle placement (kernel `_sim.spawn.Placer`) -------------------------------
+# -- agent and static-vehicle placement (kernel `_sim.placement.Placer`) -------------------------------
 
 
 def _gathered(chunks: Chunks, box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -460,7 +461,7 @@ def _far(xy: np.ndarray, radius: np.ndarray, p: np.ndarray, r: float, gap: float
 def place_agents_reference(
     spawner: PaperSpawner, index: MapIndex, box: np.ndarray, rng: np.random.Generator, n_parked: int
 ) -> tuple[np.ndarray, int]:
-    """NumPy reference of `_sim.spawn.Placer.agents` with `spawner`'s settings: the same draws
+    """NumPy reference of `_sim.placement.Placer.agents` with `spawner`'s settings: the same draws
     from `rng` in the same order, one candidate at a time.
 
     Returns:
@@ -548,7 +549,7 @@ def place_statics_reference(
     clear_ahead: float,
     headway: float,
 ) -> np.ndarray:
-    """NumPy reference of `_sim.spawn.Placer.statics` with `spawner`'s settings.
+    """NumPy reference of `_sim.placement.Placer.statics` with `spawner`'s settings.
 
     Args:
         agents: The placed agents as stored in the scenario: "xy" (n, 2), "heading", "speed",

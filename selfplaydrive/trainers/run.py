@@ -15,7 +15,6 @@ import json
 import math
 import platform
 import random
-import subprocess
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -276,18 +275,11 @@ def run_info(env, model: nn.Module, trainer: PPOTrainer) -> dict[str, object]:
 
 
 def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=False,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
+    """The checkout's commit, None outside a git checkout (selfplaydrive/runs.py)."""
+    from selfplaydrive.runs import git_commit
+
+    commit = git_commit()
+    return None if commit == "unknown" else commit
 
 
 def _write_json(path: Path, data: dict[str, object]) -> None:

@@ -12,13 +12,19 @@ episodes) so that every check sees resets, terminations and truncations within i
 The default suite runs the default combination (friction, discrete, remove, rule-based) and one
 combination that flips every axis; the full product is marked slow:
 ``pytest tests/conformance -m slow``.
+
+The shipped component checkers (selfplaydrive.testing: `check_spawner`, `check_reward_term`) run
+over spawner x physics model x reward term (a compiled built-in, a Python and a numba term).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
+import sys
 import warnings
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +129,68 @@ def test_parallel_env_checkers(small_map, physics, actions, terminated, _):
         lambda: DrivingParallelEnv(native_env(small_map, physics, actions, terminated)), num_cycles=40
     )
     assert env.possible_agents == [f"agent_{i}" for i in range(4)]
+
+
+# the shipped component checkers over spawner x physics x reward term ------------------------
+# (an encoder axis joins when observation encoders are components: selfplaydrive.obs.base)
+TERMS = ("builtin", "python", "numba")
+
+
+class SpeedLimit:
+    """A Python reward term (docs/components.md)."""
+
+    name = "speed_limit"
+
+    def __call__(self, state):
+        return np.float32(-0.01) * np.maximum(state.speed - np.float32(14.0), np.float32(0.0))
+
+
+def reward_term(form: str):
+    from selfplaydrive.rewards import get_term
+
+    if form == "builtin":
+        return get_term("collision").renamed("collision_copy")
+    if form == "python":
+        return SpeedLimit()
+    pytest.importorskip("numba")
+    path = Path(__file__).resolve().parents[2] / "examples" / "07_term_numba.py"
+    spec = importlib.util.spec_from_file_location("term_numba_example", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.path.insert(0, str(path.parent))  # the example imports its sibling _terms.py
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(path.parent))
+    return module.speed_limit_term()
+
+
+def physics_model(name: str):
+    from hydra.utils import instantiate
+
+    if name == "pymunk":
+        pytest.importorskip("pymunk")
+    return instantiate(compose("sim", [f"physics={name}"]).physics.model)
+
+
+def small_spawner():
+    from selfplaydrive.scenario import PaperSpawner
+
+    return PaperSpawner(
+        num_agents=4, num_static=4, num_pedestrians=2, min_region_lane_length=300.0, episode_lengths=(2.0,)
+    )
+
+
+@pytest.mark.parametrize("physics", PHYSICS)
+def test_spawner_checker(small_map, physics):
+    from selfplaydrive.testing import check_spawner
+
+    check_spawner(small_spawner(), small_map, samples=4, steps=25, physics=physics_model(physics))
+
+
+@pytest.mark.parametrize("form", TERMS)
+@pytest.mark.parametrize("physics", PHYSICS)
+def test_reward_term_checker(small_map, physics, form):
+    from selfplaydrive.testing import check_reward_term
+
+    check_reward_term(reward_term(form), small_map, small_spawner(), steps=25, physics=physics_model(physics))

@@ -139,7 +139,7 @@ def test_kernel_matches_numpy_reference(grid2):
     h = rng.uniform(1.0, 80.0, a)
     key = 0x1234_5678_9ABC_DEF0
     ref = sample_routes_reference(t, lane, s, h, key, lane_change_prob=0.4)
-    from selfplaydrive._sim.spawn import walk_routes
+    from selfplaydrive._sim.lanes import walk_routes
 
     out = _empty_batch(a, 128)
     walk_routes(
@@ -168,7 +168,7 @@ def test_kernel_matches_numpy_reference(grid2):
 
 
 def test_hash_uniforms_kernel_matches_numpy_and_is_uniform():
-    from selfplaydrive._sim.spawn import hash_uniforms as kernel_uniforms
+    from selfplaydrive._sim.lanes import hash_uniforms as kernel_uniforms
 
     u = hash_uniforms(2**63 - 12345, 40, 3000)
     np.testing.assert_array_equal(kernel_uniforms(2**63 - 12345, 40, 3000), u)

@@ -11,8 +11,8 @@ from matplotlib.colors import to_rgb
 from PIL import Image
 
 from selfplaydrive.builder import make_env
+from selfplaydrive.policies import infer_model_spec, make_policy
 from selfplaydrive.render.episode import LIGHT_COLORS, STATUS_COLORS, EpisodeRenderer, box_corners
-from selfplaydrive.render.policies import infer_model_spec, make_policy
 from selfplaydrive.render.record import record_episode
 from selfplaydrive.render.video import has_mp4, png_paths, write_video
 

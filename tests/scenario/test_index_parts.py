@@ -213,7 +213,7 @@ def test_no_roadside_spots_near_crosswalks_or_junction_mouths(grid_map):
 def test_pedestrian_kernel_matches_reference(grid_map):
     """Site choice, paths and clearance tests of the kernel equal the NumPy reference bit for
     bit, on random draws with vehicles that block some paths (moving and standing)."""
-    from selfplaydrive._sim.spawn import pedestrian_paths, pedestrian_sites
+    from selfplaydrive._sim.pedestrians import pedestrian_paths, pedestrian_sites
 
     idx = map_index(grid_map)
     rng = np.random.default_rng(8)
@@ -245,7 +245,8 @@ def test_placement_kernels_match_references(grid_map):
     """Vehicle sizes, aligned candidates, roadside poses and the bimodal coefficient draw of
     the spawner kernels equal their NumPy references bit for bit on random inputs (headings
     around the +-pi wrap, lanes narrower than vehicles, edges missing)."""
-    from selfplaydrive._sim.spawn import aligned_candidates, bimodal_uniform, roadside_poses, vehicle_sizes
+    from selfplaydrive._sim.placement import aligned_candidates, roadside_poses
+    from selfplaydrive._sim.samplers import bimodal_uniform, vehicle_sizes
 
     idx = map_index(grid_map)
     lanes = grid_map.lanes
@@ -387,7 +388,7 @@ def test_placement_kernel_matches_reference(grid_map, kwargs):
 def test_boxes_meet_kernel_matches_reference():
     """The separating-axis test of the static placement agrees with the corner-projection
     reference on random box pairs, overlapping and apart."""
-    from selfplaydrive._sim.spawn import boxes_meet
+    from selfplaydrive._sim.placement import boxes_meet
 
     rng = np.random.default_rng(4)
     hits = 0

@@ -3,14 +3,14 @@ the env's full simulation state and the trainer's per-slot recurrent state.
 
 Resuming from a checkpoint continues training as if it had never stopped: on the CPU the
 parameters after M more updates are bit-identical to an uninterrupted run (tests/trainers/
-test_resume.py). The env's state is every buffer of `VecEnv.buffers`, the per-world NumPy
-generators and the pending Python-side state; the spawner must draw its randomness only from
-the generator it is handed (DESIGN.md principle 7), or expose `state_dict`/`load_state_dict`.
+test_resume.py). The env's state is `VecEnv.get_state()` (sim/state.py: buffers, per-world
+generators, pending statistics); the spawner must draw its randomness only from the generator
+it is handed (DESIGN.md principle 7). Format 1 checkpoints (the env's attributes pickled as
+they were) still load.
 """
 
 from __future__ import annotations
 
-import copy
 import os
 import random
 import re
@@ -24,70 +24,68 @@ from selfplaydrive.errors import CheckpointError
 with requires_extra("torch"):
     import torch
 
-FORMAT_VERSION = 1
+# 2: the env entry is `VecEnv.get_state()`; 1: the env's attributes as they were (still read)
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 # what every checkpoint of `PPOTrainer.state_dict` holds; a .pt without them is foreign
 REQUIRED_KEYS = frozenset({"format_version", "model", "optimizer", "counters", "env"})
 # what acting needs (eval, render, a shipped policy): the weights; a training checkpoint has more
 POLICY_KEYS = frozenset({"format_version", "model"})
-_ENV_PY_ATTRS = ("_seed", "_pending_first", "episode_stats", "_extra_sums")
 
 
 def env_state(env) -> dict[str, object]:
-    """Everything needed to continue `env` (a `VecEnv`) exactly where it is.
+    """Everything needed to continue `env` (a `VecEnv`) exactly where it is: `env.get_state()`.
 
     Raises:
-        TypeError: When `env` lacks the `VecEnv` attributes this relies on.
+        TypeError: When `env` has no `get_state` (not a selfplaydrive `VecEnv`).
     """
-    for attr in ("buffers", "_world_rngs"):
-        if not hasattr(env, attr):
-            raise TypeError(
-                f"env: expected a selfplaydrive VecEnv with attribute {attr!r}, got {type(env).__name__}"
-            )
-    state: dict[str, object] = {
-        "buffers": {k: v.copy() for k, v in env.buffers.items()},
-        "extra_terms": env.extra_terms.copy(),
-        "reward_mask": env.reward_mask.copy(),
-        "world_rngs": [g.bit_generator.state for g in env._world_rngs],
-        "py": {a: copy.deepcopy(getattr(env, a)) for a in _ENV_PY_ATTRS if hasattr(env, a)},
-    }
-    if hasattr(env.spawner, "state_dict"):
-        state["spawner"] = env.spawner.state_dict()
-    return state
+    if not callable(getattr(env, "get_state", None)):
+        raise TypeError(f"env: expected a selfplaydrive VecEnv (with get_state), got {type(env).__name__}")
+    return env.get_state()
 
 
 def load_env_state(env, state: dict[str, object]) -> None:
-    """Restore `env_state(env)` into an env built with the same maps, spawner and sizes.
+    """Restore `env_state(env)` (or the env entry of a format 1 checkpoint) into an env built
+    with the same maps, spawner and sizes.
 
     Raises:
-        ValueError: When a buffer's shape or dtype differs (another env configuration).
+        ValueError: When a field's shape or dtype differs (another env configuration), naming it.
     """
-    bufs = state["buffers"]
-    if set(bufs) != set(env.buffers):
+    if "version" not in state and "buffers" in state:
+        state = _env_state_from_v1(env, state)
+    env.set_state(state)
+
+
+def _env_state_from_v1(env, old: dict[str, object]) -> dict[str, object]:
+    """The `VecEnv.get_state` form of a format 1 env entry: buffers, `extra_terms` (a view of
+    the `terms` buffer, so already in it), `reward_mask`, the generators' state dicts and the
+    attributes `_seed`, `_pending_first` (a `Scenario` or None) and `episode_stats`."""
+    from selfplaydrive.sim import state as fmt
+
+    py: dict = old.get("py", {})  # type: ignore[assignment]
+    seed = py.get("_seed")
+    state: dict[str, object] = {
+        "version": fmt.STATE_VERSION,
+        # format 1 kept no sizes: the buffer shapes are checked against this env instead
+        "num_worlds": env.num_worlds,
+        "agents_per_world": env.agents_per_world,
+        "map_names": np.array([m.name for m in env.maps], dtype=str),
+        "term_names": np.array(list(env.term_names), dtype=str),
+        "seed": -1 if seed is None else int(seed),
+        "dropped_episode_stats": int(py.get("dropped_episode_stats", 0)),
+        "reward_mask": old["reward_mask"],
+    }
+    state.update({f"buffers.{k}": v for k, v in old["buffers"].items()})  # type: ignore[attr-defined]
+    rngs: list = old["world_rngs"]  # type: ignore[assignment]
+    if len(rngs) != env.num_worlds:
         raise ValueError(
-            f"checkpoint env buffers {sorted(set(bufs) ^ set(env.buffers))} differ from this env's: "
-            "expected an env built from the same configuration"
+            f"checkpoint has {len(rngs)} world generators, this env {env.num_worlds}: "
+            "expected the same num_worlds"
         )
-    for name, saved in bufs.items():
-        live = env.buffers[name]
-        if saved.shape != live.shape or saved.dtype != live.dtype:
-            raise ValueError(
-                f"checkpoint env buffer {name!r}: shape {saved.shape} dtype {saved.dtype}, this env has "
-                f"{live.shape} {live.dtype}: expected an env built from the same configuration"
-            )
-        np.copyto(live, saved)  # in place: the Cython World keeps pointers to these arrays
-    np.copyto(env.extra_terms, state["extra_terms"])
-    np.copyto(env.reward_mask, state["reward_mask"])
-    if len(state["world_rngs"]) != len(env._world_rngs):
-        raise ValueError(
-            f"checkpoint has {len(state['world_rngs'])} world generators, this env "
-            f"{len(env._world_rngs)}: expected the same num_worlds"
-        )
-    for g, s in zip(env._world_rngs, state["world_rngs"], strict=True):
-        g.bit_generator.state = s
-    for attr, value in state["py"].items():
-        setattr(env, attr, copy.deepcopy(value))
-    if "spawner" in state and hasattr(env.spawner, "load_state_dict"):
-        env.spawner.load_state_dict(state["spawner"])
+    state.update(fmt.encode_generators(rngs))
+    state.update(fmt.encode_episode_stats(py.get("episode_stats", []), fmt.stat_columns(env)))
+    state.update(fmt.encode_pending(py.get("_pending_first")))
+    return state
 
 
 def rng_state() -> dict[str, object]:
@@ -196,9 +194,11 @@ def load(
         raise CheckpointError(
             f"not a selfplaydrive checkpoint: a {type(payload).__name__} without the key(s) {missing}", path
         )
-    if payload["format_version"] != FORMAT_VERSION:
+    if payload["format_version"] not in READABLE_VERSIONS:
         raise CheckpointError(
-            f"format_version {payload['format_version']!r}, expected {FORMAT_VERSION}", path
+            f"format_version {payload['format_version']!r}, expected one of {READABLE_VERSIONS} (this "
+            "selfplaydrive reads those; a newer one needs a newer selfplaydrive)",
+            path,
         )
     return payload
 
