@@ -23,7 +23,7 @@ from selfplaydrive.models.common import (
     middle_prior_bias,
     mlp,
 )
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 
 with requires_extra("torch"):
     import torch

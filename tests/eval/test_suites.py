@@ -28,7 +28,7 @@ from selfplaydrive.eval.suites.stop_lines import classify_stop_line, constant_sp
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.maps.roadmap import SegmentType
 from selfplaydrive.sim.actions import ContinuousActions
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.sim.vec_env import VecEnv
 
 
