@@ -301,6 +301,14 @@ cdef class World:
         for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)):
             self.timings[name] += dt
 
+    def encode(self, int num_threads=1):
+        """Run only the observation encoder on every world, as the step does (the encoder
+        checker, selfplaydrive/testing/check_encoder.py, compares the buffers around it)."""
+        cdef int w, W = self.sim.W
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                encode_world(&self.sim, &self.atlas, &self.prm, &self.enc, w)
+
     def after_reset(self, cnp.ndarray worlds, int num_threads=1):
         """Finish the reset of the listed worlds (int32 indices) after their scenario was packed."""
         cdef const int32_t[::1] ws = np.ascontiguousarray(worlds, dtype=np.int32)
