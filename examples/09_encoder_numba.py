@@ -56,11 +56,25 @@ def ego_objects(sim, prm, atlas, args, w, out, stride):  # type: ignore[no-untyp
     speed, length, width = f32_ptr(sim, SIM.speed), f32_ptr(sim, SIM.length), f32_ptr(sim, SIM.width)
     active, obstacle = u8_ptr(sim, SIM.active), u8_ptr(sim, SIM.obstacle)
     wps, num_wp, wp_idx = f32_ptr(sim, SIM.waypoints), i32_ptr(sim, SIM.num_wp), i32_ptr(sim, SIM.wp_idx)
-    lane_s, lane_alpha, lane_valid = f32_ptr(sim, SIM.lane_s), f32_ptr(sim, SIM.lane_alpha), u8_ptr(sim, SIM.lane_valid)
+    lane_s, lane_alpha, lane_valid = (
+        f32_ptr(sim, SIM.lane_s),
+        f32_ptr(sim, SIM.lane_alpha),
+        u8_ptr(sim, SIM.lane_valid),
+    )
     coeffs = f32_ptr(sim, SIM.coeffs)
-    st_x, st_y, st_c, st_s = f32_ptr(sim, SIM.st_x), f32_ptr(sim, SIM.st_y), f32_ptr(sim, SIM.st_cos), f32_ptr(sim, SIM.st_sin)
+    st_x, st_y, st_c, st_s = (
+        f32_ptr(sim, SIM.st_x),
+        f32_ptr(sim, SIM.st_y),
+        f32_ptr(sim, SIM.st_cos),
+        f32_ptr(sim, SIM.st_sin),
+    )
     st_len, st_wid, st_valid = f32_ptr(sim, SIM.st_len), f32_ptr(sim, SIM.st_wid), u8_ptr(sim, SIM.st_valid)
-    p_x, p_y, p_c, p_s = f32_ptr(sim, SIM.ped_x), f32_ptr(sim, SIM.ped_y), f32_ptr(sim, SIM.ped_cos), f32_ptr(sim, SIM.ped_sin)
+    p_x, p_y, p_c, p_s = (
+        f32_ptr(sim, SIM.ped_x),
+        f32_ptr(sim, SIM.ped_y),
+        f32_ptr(sim, SIM.ped_cos),
+        f32_ptr(sim, SIM.ped_sin),
+    )
     p_vx, p_vy = f32_ptr(sim, SIM.ped_vx), f32_ptr(sim, SIM.ped_vy)
     p_len, p_wid = f32_ptr(sim, SIM.ped_len), f32_ptr(sim, SIM.ped_wid)
     p_valid, p_here = u8_ptr(sim, SIM.ped_valid), u8_ptr(sim, SIM.ped_here)

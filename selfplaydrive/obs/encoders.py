@@ -72,13 +72,19 @@ class KernelEncoder:
     def __post_init__(self) -> None:
         _check_common(self.name, self.layout, self.radius)
         if not isinstance(self.address, int) or isinstance(self.address, bool) or self.address <= 0:
-            raise ConfigError(f"encoder {self.name!r}: address must be a positive integer, got {self.address!r}")
+            raise ConfigError(
+                f"encoder {self.name!r}: address must be a positive integer, got {self.address!r}"
+            )
         object.__setattr__(self, "args", _pack_args(self.name, self.args))
         gather = self.layout.max_road if self.road_gather is None else self.road_gather
         if isinstance(gather, bool) or not isinstance(gather, (int, np.integer)) or gather < 0:
             raise ConfigError(f"encoder {self.name!r}: road_gather must be an integer >= 0, got {gather!r}")
         object.__setattr__(self, "road_gather", max(int(gather), 1))
-        if isinstance(self.scratch, bool) or not isinstance(self.scratch, (int, np.integer)) or self.scratch < 0:
+        if (
+            isinstance(self.scratch, bool)
+            or not isinstance(self.scratch, (int, np.integer))
+            or self.scratch < 0
+        ):
             raise ConfigError(f"encoder {self.name!r}: scratch must be an integer >= 0, got {self.scratch!r}")
 
     def plan(self) -> tuple[int, np.ndarray | None]:
@@ -247,8 +253,12 @@ class PartialObsEncoder(KernelEncoder):
         if not isinstance(occlusion, (bool, np.bool_)):
             raise ConfigError(f"obs.occlusion: expected true or false, got {occlusion!r}")
         _in_range("obs.visible_fraction", visible_fraction, 0.0, 1.0)
-        for key, v in (("pos_std", pos_std), ("heading_std", heading_std), ("speed_std", speed_std),
-                       ("fp_rate", fp_rate)):
+        for key, v in (
+            ("pos_std", pos_std),
+            ("heading_std", heading_std),
+            ("speed_std", speed_std),
+            ("fp_rate", fp_rate),
+        ):
             _in_range(f"obs.{key}", v, 0.0, math.inf)
         _in_range("obs.p_miss", p_miss, 0.0, 1.0)
         _in_range("obs.fp_length", fp_length, 0.0, math.inf, low_open=True)
@@ -259,9 +269,14 @@ class PartialObsEncoder(KernelEncoder):
         rec["salt"] = np.uint64(int(seed))
         rec["occlusion"] = int(bool(occlusion))
         for key, v in (
-            ("visible_fraction", visible_fraction), ("pos_std", pos_std), ("heading_std", heading_std),
-            ("speed_std", speed_std), ("p_miss", p_miss), ("fp_rate", fp_rate),
-            ("fp_length", fp_length), ("fp_width", fp_width),
+            ("visible_fraction", visible_fraction),
+            ("pos_std", pos_std),
+            ("heading_std", heading_std),
+            ("speed_std", speed_std),
+            ("p_miss", p_miss),
+            ("fp_rate", fp_rate),
+            ("fp_length", fp_length),
+            ("fp_width", fp_width),
         ):
             rec[key] = v
         self.params = {name: rec[name][0].item() for name in PARTIAL_ARGS_DTYPE.names or ()}
@@ -336,7 +351,11 @@ def _check_common(name: object, layout: object, radius: object) -> None:
 
 
 def _in_range(key: str, value: object, low: float, high: float, low_open: bool = False) -> None:
-    ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and math.isfinite(float(value))
+    ok = (
+        isinstance(value, (int, float, np.number))
+        and not isinstance(value, bool)
+        and math.isfinite(float(value))
+    )
     if ok:
         v = float(value)  # type: ignore[arg-type]
         ok = (v > low if low_open else v >= low) and v <= high
@@ -356,11 +375,15 @@ def _pack_args(name: str, args: object) -> np.ndarray | None:
         try:
             a = np.asarray([float(v) for v in args], dtype=np.float32)
         except (TypeError, ValueError):
-            raise ConfigError(f"encoder {name!r}: args must be numbers, bytes or an array, got {args!r}") from None
+            raise ConfigError(
+                f"encoder {name!r}: args must be numbers, bytes or an array, got {args!r}"
+            ) from None
         if not np.all(np.isfinite(a)):
             raise ConfigError(f"encoder {name!r}: args must be finite numbers, got {args!r}")
     else:
-        raise ConfigError(f"encoder {name!r}: args must be numbers, bytes or an array, got {type(args).__name__}")
+        raise ConfigError(
+            f"encoder {name!r}: args must be numbers, bytes or an array, got {type(args).__name__}"
+        )
     if a.size == 0:
         return None
     a.flags.writeable = False

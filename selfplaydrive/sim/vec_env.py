@@ -35,13 +35,13 @@ from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.obs.encoders import Encoder, KernelEncoder, as_encoder
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
 from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
-from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.sim.params import SimParams
 
 _FAST_ACTION_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
@@ -129,9 +129,15 @@ class VecEnv:
         self.encoder = as_encoder(obs)
         self._kernel_encoder = isinstance(self.encoder, KernelEncoder)
         enc_layout = self.encoder.layout
-        road_gather = self.encoder.road_gather if isinstance(self.encoder, KernelEncoder) else max(enc_layout.max_road, 1)
+        road_gather = (
+            self.encoder.road_gather
+            if isinstance(self.encoder, KernelEncoder)
+            else max(enc_layout.max_road, 1)
+        )
         # the sizes the kernels see (obs_radius, the road gather), as before the encoders
-        self.obs_config = ObsConfig(max(enc_layout.max_objects, 1), int(road_gather or 1), float(self.encoder.radius))
+        self.obs_config = ObsConfig(
+            max(enc_layout.max_objects, 1), int(road_gather or 1), float(self.encoder.radius)
+        )
         # ---- end observation encoder ----
         self.num_threads = num_threads
         self.terminated_vehicle = terminated_vehicle
@@ -369,6 +375,7 @@ class VecEnv:
         rows = self.masks if ended is None else (self.masks | ended)
         if not self._kernel_encoder:
             enc = self.encoder
+            assert not isinstance(enc, KernelEncoder)  # _kernel_encoder is False
             d = self._encoder_dim
             f = np.asarray(enc(self.state), dtype=np.float32)
             if f.shape != (self.num_agents, d):

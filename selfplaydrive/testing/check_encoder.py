@@ -96,20 +96,24 @@ def check_encoder(
     n = envs[0].num_agents
     blocks = sum(int(np.prod(shape)) for shape in lay.blocks().values())
     if blocks != lay.obs_dim or enc.layout.obs_dim > lay.obs_dim:
-        raise EncoderCheckError(f"encoder {name!r}: layout blocks {lay.blocks()} add up to {blocks}, obs_dim {lay.obs_dim}")
+        raise EncoderCheckError(
+            f"encoder {name!r}: layout blocks {lay.blocks()} add up to {blocks}, obs_dim {lay.obs_dim}"
+        )
     for env in envs:
         if env.observations.shape != (n, lay.obs_dim):
             raise EncoderCheckError(
-                f"encoder {name!r} (shape): observations {env.observations.shape}, expected ({n}, {lay.obs_dim})"
+                f"encoder {name!r} (shape): observations {env.observations.shape}, "
+                f"expected ({n}, {lay.obs_dim})"
             )
-    nvec = np.asarray(envs[0].action_space.nvec)
-    acts = np.random.default_rng(seed).integers(0, nvec, size=(steps, n, len(nvec)))
+    acts = _random_actions(envs[0].action_space, steps, n, seed)
     obs0 = [env.reset(seed) for env in envs]
     _same(envs, name, -1)
     rows = 0
     max_abs = 0.0
     d = enc.layout.obs_dim
-    rows, max_abs = _values(obs0[0][envs[0].masks][:, :d], name, lay.bound, -1, np.flatnonzero(envs[0].masks), rows, max_abs)
+    rows, max_abs = _values(
+        obs0[0][envs[0].masks][:, :d], name, lay.bound, -1, np.flatnonzero(envs[0].masks), rows, max_abs
+    )
     isolation = 0
     for k in range(steps):
         for env in envs:
@@ -117,12 +121,26 @@ def check_encoder(
         _same(envs, name, k)
         env = envs[0]
         ended = env.terminations | env.truncations
-        rows, max_abs = _values(env.observations[env.masks][:, :d], name, lay.bound, k, np.flatnonzero(env.masks), rows, max_abs)
-        rows, max_abs = _values(env.final_observations[ended][:, :d], name, lay.bound, k, np.flatnonzero(ended), rows, max_abs)
+        rows, max_abs = _values(
+            env.observations[env.masks][:, :d], name, lay.bound, k, np.flatnonzero(env.masks), rows, max_abs
+        )
+        rows, max_abs = _values(
+            env.final_observations[ended][:, :d], name, lay.bound, k, np.flatnonzero(ended), rows, max_abs
+        )
         if isinstance(enc, KernelEncoder) and k % 5 == 4:
             _isolated(env, name, k)
             isolation += 1
     return EncoderReport(name, lay.obs_dim, steps, rows, max_abs, isolation)
+
+
+def _random_actions(space: Any, steps: int, n: int, seed: int) -> np.ndarray:
+    """(steps, n, 2) uniform random actions of a MultiDiscrete or Box action space."""
+    rng = np.random.default_rng(seed)
+    if hasattr(space, "nvec"):
+        nvec = np.asarray(space.nvec)
+        return rng.integers(0, nvec, size=(steps, n, len(nvec)))
+    low, high = np.asarray(space.low), np.asarray(space.high)
+    return rng.uniform(low, high, size=(steps, n, *low.shape)).astype(np.float32)
 
 
 def _values(
@@ -157,7 +175,8 @@ def _same(envs: list[Any], name: str, step: int) -> None:
     for key in a:
         if key not in SCRATCH and a[key] != b[key]:
             raise EncoderCheckError(
-                f"encoder {name!r} (determinism): buffer {key!r} differs between 1 and 2 threads after step {step}"
+                f"encoder {name!r} (determinism): buffer {key!r} differs between 1 and 2 threads "
+                f"after step {step}"
             )
 
 
@@ -177,12 +196,14 @@ def _isolated(env: Any, name: str, step: int) -> None:
             if changed.any():
                 slot = int(np.flatnonzero(inactive)[np.flatnonzero(changed)[0]])
                 raise EncoderCheckError(
-                    f"encoder {name!r} (isolation): wrote the obs row of inactive agent slot {slot} (step {step})"
+                    f"encoder {name!r} (isolation): wrote the obs row of inactive agent slot {slot} "
+                    f"(step {step})"
                 )
             continue
         if not np.array_equal(old, new, equal_nan=old.dtype.kind == "f"):
             idx = np.argwhere(old != new)
             raise EncoderCheckError(
-                f"encoder {name!r} (isolation): wrote buffer {key!r} at index {tuple(int(i) for i in idx[0])} "
-                f"(step {step}); an encoder may write only its obs rows and the scratch {SCRATCH}"
+                f"encoder {name!r} (isolation): wrote buffer {key!r} at index "
+                f"{tuple(int(i) for i in idx[0])} (step {step}); an encoder may write only its obs rows "
+                f"and the scratch {SCRATCH}"
             )

@@ -87,7 +87,12 @@ def visible_fractions(rows: np.ndarray, scales: Mapping[str, float]) -> np.ndarr
 
 
 def postprocess(
-    rows: np.ndarray, n: int, params: Mapping[str, Any], key: int, step: int, slot: int,
+    rows: np.ndarray,
+    n: int,
+    params: Mapping[str, Any],
+    key: int,
+    step: int,
+    slot: int,
     scales: Mapping[str, float],
 ) -> tuple[np.ndarray, int]:
     """The encoder's effects on one agent's object rows ((max_obj, 9), `n` of them written):

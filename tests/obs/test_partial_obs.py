@@ -99,7 +99,7 @@ def test_visible_fraction_by_hand():
 
 def test_a_box_around_the_ego_centre_neither_hides_nor_is_hidden():
     around = row(0.5, 0.0, length=6.0, width=3.0)
-    out, n = kernel([around, row(20.0, 0.0)], PartialObsEncoder(occlusion=True))
+    _, n = kernel([around, row(20.0, 0.0)], PartialObsEncoder(occlusion=True))
     assert n == 2
 
 
@@ -183,8 +183,12 @@ def rollout(town, obs, threads=1, steps=25, worlds=3):
     frames = []
     for k in range(steps):
         env.step(acts[k])
-        frames.append({name: np.array(env.buffers[name]) for name in ("obs", "final_obs", "active", "obj_rows",
-                                                                       "rng_key", "step", "x", "speed")})
+        frames.append(
+            {
+                name: np.array(env.buffers[name])
+                for name in ("obs", "final_obs", "active", "obj_rows", "rng_key", "step", "x", "speed")
+            }
+        )
     return env, frames
 
 
@@ -211,12 +215,16 @@ def test_the_env_encoder_is_the_reference_applied_to_the_paper_rows(town):
             w, a = divmod(int(i), A)
             key = partial.stream_key(int(p["rng_key"][w]), 7)
             rows = lay.split(p["obs"][i : i + 1])["objects"][0]
-            want, wn = ref.postprocess(rows, int(p["obj_rows"][i]), enc.params, key, int(p["step"][w]), a, SCALES)
+            want, wn = ref.postprocess(
+                rows, int(p["obj_rows"][i]), enc.params, key, int(p["step"][w]), a, SCALES
+            )
             have = lay.split(g["obs"][i : i + 1])["objects"][0]
             np.testing.assert_allclose(have, want, atol=2e-6)
             assert int(g["obj_rows"][i]) == wn
             # ego and road rows are the paper's
-            np.testing.assert_array_equal(g["obs"][i, : lay.objects_offset], p["obs"][i, : lay.objects_offset])
+            np.testing.assert_array_equal(
+                g["obs"][i, : lay.objects_offset], p["obs"][i, : lay.objects_offset]
+            )
             np.testing.assert_array_equal(g["obs"][i, lay.road_offset :], p["obs"][i, lay.road_offset :])
             checked += 1
             hidden += int(p["obj_rows"][i]) - wn
@@ -239,8 +247,9 @@ def test_p_miss_one_in_the_env_observes_no_object(town):
 
 @pytest.mark.parametrize(
     ("key", "value", "expected"),
-    [("p_miss", 1.5, "[0.0, 1.0]"), ("visible_fraction", -0.1, "[0.0, 1.0]"), ("pos_std", float("nan"), "finite"),
-     ("fp_width", 0.0, "(0.0"), ("occlusion", "yes", "true or false"), ("seed", -1, "[0, 2**64)")],
+    [("p_miss", 1.5, "[0.0, 1.0]"), ("visible_fraction", -0.1, "[0.0, 1.0]"),
+     ("pos_std", float("nan"), "finite"), ("fp_width", 0.0, "(0.0"), ("occlusion", "yes", "true or false"),
+     ("seed", -1, "[0, 2**64)")],
 )  # fmt: skip
 def test_bad_values_name_key_value_and_range(key, value, expected):
     with pytest.raises(ConfigError, match=rf"obs\.{key}.*{__import__('re').escape(expected)}"):

@@ -22,10 +22,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from selfplaydrive.maps.roadmap import RoadMap, SegmentType
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS
 from selfplaydrive.scenario.types import Scenario
-from selfplaydrive.obs.layout import ObsLayout
 
 AGENT_SLOTS = 2  # A: the ego, and the second vehicle of the stop-line suite
 STATIC_SLOTS = 1  # S: always invalid (the kernels want at least one slot of each kind)
