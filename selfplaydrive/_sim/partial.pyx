@@ -96,6 +96,9 @@ cdef void encode_partial(const Sim* sim, const Params* prm, const Atlas* atlas, 
     cdef uintptr_t base = <uintptr_t>((<Sim*>sim).cand_d + <int64_t>w * sim.cand_cap)
     cdef double* scratch = <double*>((base + 7) & ~(<uintptr_t>7))
     encode_paper(sim, prm, atlas, NULL, w, obs, stride)
+    if not (p.occlusion or p.p_miss > 0.0 or p.fp_rate > 0.0 or p.pos_std > 0.0
+            or p.heading_std > 0.0 or p.speed_std > 0.0):
+        return  # every effect off: the paper's rows (and no cost beyond this test)
     for a in range(sim.A):
         i = w * sim.A + a
         if sim.active[i]:
@@ -115,15 +118,18 @@ cdef int postprocess(float* o, int n, int max_obj, const PartialArgs* p, uint64_
     cdef double* lo = scratch
     cdef double* hi = lo + max_obj
     cdef double* dist = hi + max_obj
-    cdef double* keep = dist + max_obj
-    cdef double* ivl = keep + max_obj          # 2 * 3 * max_obj interval ends
+    cdef double* phi = dist + max_obj
+    cdef double* keep = phi + max_obj
+    cdef double* ivl = keep + max_obj          # 2 * 2 * max_obj interval ends
+    cdef int32_t* order = <int32_t*>(ivl + 4 * max_obj)
     cdef float* row
     if n > max_obj:
         n = max_obj
     if p.occlusion:
-        angular_extents(o, n, pos_scale, length_scale, width_scale, lo, hi, dist)
+        angular_extents(o, n, pos_scale, length_scale, width_scale, lo, hi, dist, phi)
+        by_distance(dist, n, order)
         for k in range(n):
-            keep[k] = visible_fraction(o, n, k, lo, hi, dist, ivl) >= p.visible_fraction
+            keep[k] = visible_fraction(n, k, lo, hi, dist, phi, order, ivl) >= p.visible_fraction
     else:
         for k in range(n):
             keep[k] = 1.0
@@ -131,9 +137,9 @@ cdef int postprocess(float* o, int n, int max_obj, const PartialArgs* p, uint64_
         if keep[k] == 0.0:
             continue
         ctr = row_counter(step, a, k)
-        u = rng_uniform(key, &ctr)
-        if p.p_miss > 0.0 and u < p.p_miss:
+        if p.p_miss > 0.0 and rng_uniform(key, &ctr) < p.p_miss:
             continue
+        ctr = row_counter(step, a, k) + 1   # the noise's draws follow the miss draw's counter
         row = o + m * OBJ_DIM
         if m != k:
             memmove(row, o + k * OBJ_DIM, OBJ_DIM * sizeof(float))
@@ -213,12 +219,14 @@ cdef inline void add_noise(float* row, const PartialArgs* p, double z0, double z
 
 
 cdef void angular_extents(const float* o, int n, float pos_scale, float length_scale,
-                          float width_scale, double* lo, double* hi, double* dist) noexcept nogil:
-    """Angular interval [lo, hi] of each object box around the direction of its centre, seen
-    from the ego's centre (the origin of the ego frame), and its centre distance; a box that
-    contains the origin gets dist = -1 (it neither occludes nor is occluded)."""
+                          float width_scale, double* lo, double* hi, double* dist,
+                          double* phi) noexcept nogil:
+    """Angular interval [lo, hi] of each object box around the direction of its centre `phi`,
+    seen from the ego's centre (the origin of the ego frame), and its centre distance; a box
+    that contains the origin gets dist = -1 (it neither occludes nor is occluded)."""
     cdef int k, q
-    cdef double x, y, c, s, hl, hw, qx, qy, d, lx, ly
+    cdef double x, y, c, s, hl, hw, qx, qy, lx, ly, cr, dt, pa, pmin, pmax
+    cdef double lcr = 0.0, ldt = 1.0, hcr = 0.0, hdt = 1.0
     for k in range(n):
         x = o[k * OBJ_DIM + 1] * <double>pos_scale
         y = o[k * OBJ_DIM + 2] * <double>pos_scale
@@ -234,38 +242,78 @@ cdef void angular_extents(const float* o, int n, float pos_scale, float length_s
             dist[k] = -1.0
             continue
         dist[k] = sqrt(x * x + y * y)
-        lo[k] = 1e300
-        hi[k] = -1e300
+        phi[k] = atan2(y, x)
+        # the extreme corners by a pseudo-angle (monotonic in the angle, no trigonometry),
+        # then the angle of those two only: 3 atan2 per box instead of 5
+        pmin = 1e300
+        pmax = -1e300
         for q in range(4):
             qx = x + (hl if q & 1 else -hl) * c - (hw if q & 2 else -hw) * s
             qy = y + (hl if q & 1 else -hl) * s + (hw if q & 2 else -hw) * c
-            d = atan2(x * qy - y * qx, x * qx + y * qy)   # corner angle minus centre angle
-            if d < lo[k]:
-                lo[k] = d
-            if d > hi[k]:
-                hi[k] = d
+            cr = x * qy - y * qx   # sin and cos of the corner angle minus the centre's, x |q| |c|
+            dt = x * qx + y * qy
+            pa = pseudo_angle(cr, dt)
+            if pa < pmin:
+                pmin = pa
+                lcr = cr
+                ldt = dt
+            if pa > pmax:
+                pmax = pa
+                hcr = cr
+                hdt = dt
+        lo[k] = atan2(lcr, ldt)
+        hi[k] = atan2(hcr, hdt)
 
 
-cdef double visible_fraction(const float* o, int n, int j, const double* lo, const double* hi,
-                             const double* dist, double* ivl) noexcept nogil:
+cdef inline double pseudo_angle(double y, double x) noexcept nogil:
+    """A strictly increasing function of atan2(y, x) on (-pi, pi], in (-2, 2]."""
+    cdef double r = y / (fabs(x) + fabs(y))
+    if x >= 0.0:
+        return r
+    return 2.0 - r if y >= 0.0 else -2.0 - r
+
+
+cdef void by_distance(const double* dist, int n, int32_t* order) noexcept nogil:
+    """order[0..n): object indices by increasing centre distance (insertion sort, stable)."""
+    cdef int k, t
+    cdef int32_t v
+    for k in range(n):
+        v = k
+        t = k - 1
+        while t >= 0 and dist[order[t]] > dist[v]:
+            order[t + 1] = order[t]
+            t -= 1
+        order[t + 1] = v
+
+
+cdef double visible_fraction(int n, int j, const double* lo, const double* hi,
+                             const double* dist, const double* phi, const int32_t* order,
+                             double* ivl) noexcept nogil:
     """Share of object j's angular extent not covered by the extents of nearer objects (centre
-    distance below j's), each taken at its angle relative to j's centre (and +-2 pi)."""
+    distance below j's), each taken at its angle relative to j's centre (and the one 2 pi shift
+    that can meet j's interval). `order`: the objects by increasing centre distance."""
     cdef int i, t, m = 0, q
-    cdef double xj, yj, xi, yi, delta, a, b, width, covered, end, sa, sb
+    cdef double delta, a, b, width, covered, end, sa, sb, shift
     if dist[j] < 0.0 or hi[j] <= lo[j]:
         return 1.0
     width = hi[j] - lo[j]
-    xj = o[j * OBJ_DIM + 1]
-    yj = o[j * OBJ_DIM + 2]
-    for i in range(n):
-        if i == j or dist[i] < 0.0 or not dist[i] < dist[j]:
+    for t in range(n):
+        i = order[t]
+        if not dist[i] < dist[j]:
+            break  # the rest are not nearer
+        if dist[i] < 0.0:
             continue
-        xi = o[i * OBJ_DIM + 1]
-        yi = o[i * OBJ_DIM + 2]
-        delta = atan2(xj * yi - yj * xi, xj * xi + yj * yi)   # angle of i's centre from j's
-        for q in range(3):
-            a = delta + lo[i] + (q - 1) * 2.0 * M_PI
-            b = delta + hi[i] + (q - 1) * 2.0 * M_PI
+        delta = phi[i] - phi[j]   # angle of i's centre from j's, in (-pi, pi]
+        if delta > M_PI:
+            delta -= 2.0 * M_PI
+        elif delta <= -M_PI:
+            delta += 2.0 * M_PI
+        # j's interval holds 0 and is narrower than pi, i's is too: only the unshifted interval
+        # and the one shifted back towards 0 can meet it
+        shift = -2.0 * M_PI if delta > 0.0 else 2.0 * M_PI
+        for q in range(2):
+            a = delta + lo[i] + (shift if q else 0.0)
+            b = delta + hi[i] + (shift if q else 0.0)
             if a < lo[j]:
                 a = lo[j]
             if b > hi[j]:
@@ -302,7 +350,8 @@ cdef double visible_fraction(const float* o, int n, int j, const double* lo, con
 
 
 def scratch_doubles(int max_obj):
-    """Doubles of scratch `postprocess` needs: lo, hi, dist, keep and 6 * max_obj interval ends."""
+    """Doubles of scratch `postprocess` needs: lo, hi, dist, phi, keep, 4 * max_obj interval ends
+    and max_obj int32 indices (in max_obj doubles)."""
     return 10 * max_obj
 
 

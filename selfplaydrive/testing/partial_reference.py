@@ -48,6 +48,10 @@ def angular_extent(row: np.ndarray, scales: Mapping[str, float]) -> tuple[float,
     return min(angles), max(angles), math.hypot(x, y)
 
 
+def _centre_angle(row: np.ndarray, scales: Mapping[str, float]) -> float:
+    return math.atan2(row[2] * scales["pos"], row[1] * scales["pos"])
+
+
 def visible_fractions(rows: np.ndarray, scales: Mapping[str, float]) -> np.ndarray:
     """Visible share of each row's angular extent: the part not covered by the extents of
     bodies with a smaller centre distance (shadow casting)."""
@@ -64,9 +68,12 @@ def visible_fractions(rows: np.ndarray, scales: Mapping[str, float]) -> np.ndarr
             ei = ext[i]
             if i == j or ei is None or not ei[2] < dj:
                 continue
-            # angle of i's centre measured from j's centre direction
-            xj, yj, xi, yi = (float(v) for v in (rows[j, 1], rows[j, 2], rows[i, 1], rows[i, 2]))
-            delta = math.atan2(xj * yi - yj * xi, xj * xi + yj * yi)
+            # angle of i's centre measured from j's centre direction, in (-pi, pi]
+            delta = _centre_angle(rows[i], scales) - _centre_angle(rows[j], scales)
+            if delta > math.pi:
+                delta -= 2 * math.pi
+            elif delta <= -math.pi:
+                delta += 2 * math.pi
             for shift in (-2 * math.pi, 0.0, 2 * math.pi):
                 a, b = max(delta + ei[0] + shift, lo), min(delta + ei[1] + shift, hi)
                 if b > a:
