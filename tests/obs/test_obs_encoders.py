@@ -275,3 +275,16 @@ def test_a_python_encoder_of_the_wrong_width_or_nan_is_named(town):
 
     with pytest.raises(ValueError, match=r"encoder 'nan': non-finite values in the row of agent slot \d+"):
         VecEnv(town, spawner(), 1, obs=Nan()).reset(0)
+
+
+@pytest.mark.parametrize("layout", [ObsLayout(5, 0), ObsLayout(0, 0), ObsLayout(0, 4, 2)])
+@pytest.mark.parametrize("model_name", ["DeepSetsModel", "TransformerModel"])
+def test_models_build_from_layouts_with_empty_blocks(layout, model_name):
+    torch = pytest.importorskip("torch")
+    from selfplaydrive import models
+
+    model = getattr(models, model_name)(layout, (7, 13))
+    obs = torch.rand(2, 3, layout.obs_dim) * 2 - 1
+    state = model.initial_state(3)
+    logits, values, _ = model.forward_sequence(obs, state, torch.zeros(2, 3, dtype=torch.bool))
+    assert logits.shape == (2, 3, 20) and torch.isfinite(logits).all() and torch.isfinite(values).all()
