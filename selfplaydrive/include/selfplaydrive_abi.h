@@ -1,6 +1,7 @@
 /* selfplaydrive component ABI: the typed view of the simulator state that kernels and
- * plug-in components read (paper section 2), and the signature of a reward-term component
- * (section 2.3). docs/components.md "Write a reward term" explains the contract.
+ * plug-in components read (paper section 2), and the signatures of a reward-term component
+ * (section 2.3) and of an observation encoder (section 2.5). docs/components.md "Write a reward
+ * term" and "Write an observation encoder" explain the contracts.
  *
  * Include with the folder of `selfplaydrive.get_include()` on the include path; Cython code
  * cimports the same declarations from `selfplaydrive_abi.pxd` in that folder.

@@ -288,3 +288,25 @@ def test_models_build_from_layouts_with_empty_blocks(layout, model_name):
     state = model.initial_state(3)
     logits, values, _ = model.forward_sequence(obs, state, torch.zeros(2, 3, dtype=torch.bool))
     assert logits.shape == (2, 3, 20) and torch.isfinite(logits).all() and torch.isfinite(values).all()
+
+
+def test_the_encoder_changes_only_the_observation(town, example09):
+    """Dynamics, events, lane association and rewards do not depend on the encoder, nor on its
+    road gather (1 segment for an encoder without road rows, 16 for the paper's here)."""
+    names = ("x", "y", "speed", "reward", "terms", "events", "lane_s", "lane_alpha", "term", "trunc")
+
+    def states(obs):
+        env = VecEnv(town, spawner(), 3, obs=obs, seed=4)
+        acts = np.random.default_rng(4).integers(0, [7, 13], size=(30, env.num_agents, 2))
+        env.reset(4)
+        out = []
+        for k in range(30):
+            env.step(acts[k])
+            out.append({n: env.buffers[n].copy() for n in names})
+        return out
+
+    for a, b in zip(
+        states(PaperEncoder(6, 16, 40.0)), states(example09.ego_objects_encoder(6, 40.0)), strict=True
+    ):
+        for n in names:
+            np.testing.assert_array_equal(a[n], b[n], err_msg=n)
