@@ -18,9 +18,14 @@ terms      The cost of one extra term column in each form: a built-in term of si
            whole step; cost = time with the term - time without, per agent-step (medians of
            per-step times, then of rounds).
 
+encoders   The observation stage per agent-step of each observation encoder (paper, partial
+           observability off / occlusion / every effect, the ego + nearest-objects encoder of
+           example 09 as numba cfunc and Cython package), `VecEnv(profile=True)`, alternated.
+
 Usage:
     python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--json]
     python benchmarks/bench_components.py terms [--rounds 5] [--json]
+    python benchmarks/bench_components.py encoders [--rounds 5] [--json]
 Run pinned (taskset -c 0) on an otherwise idle machine; both default to one thread.
 """
 
@@ -69,15 +74,18 @@ env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=th
 env.reset(0)
 for k in range(warmup):
     env.step(acts[k])
-stage = []
+stage, obs_stage = [], []
 for k in range(warmup, warmup + steps):
     m = int(np.count_nonzero(env.masks))
-    r0 = env.timings["reward"]
+    r0, o0 = env.timings["reward"], env.timings["observation"]
     env.step(acts[k])
     stage.append((env.timings["reward"] - r0) / m * 1e9)
+    obs_stage.append((env.timings["observation"] - o0) / m * 1e9)
 import selfplaydrive
 print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "median_step_ns": float(np.median(per_step)),
-                  "median_reward_stage_ns": float(np.median(stage)), "package": selfplaydrive.__file__}))
+                  "median_reward_stage_ns": float(np.median(stage)),
+                  "median_observation_stage_ns": float(np.median(obs_stage)),
+                  "package": selfplaydrive.__file__}))
 """
 
 
@@ -115,6 +123,9 @@ def overhead(args: argparse.Namespace) -> dict[str, object]:
             "agent_steps_per_s": statistics.median(x["agent_steps"] / x["wall"] for x in rs),
             "median_step_ns_per_agent": statistics.median(x["median_step_ns"] for x in rs),
             "median_reward_stage_ns_per_agent": statistics.median(x["median_reward_stage_ns"] for x in rs),
+            "median_observation_stage_ns_per_agent": statistics.median(
+                x["median_observation_stage_ns"] for x in rs
+            ),
         }
     pairs = zip(runs["baseline"], runs["components"], strict=True)
     ratios = [(b["agent_steps"] / b["cpu"]) / (c["agent_steps"] / c["cpu"]) for b, c in pairs]
@@ -212,6 +223,87 @@ def terms(args: argparse.Namespace) -> dict[str, object]:
     return out
 
 
+def _encoder_variants() -> dict[str, object]:
+    """Observation encoders of each form (issue #13; docs/components.md "Write an observation
+    encoder"): the paper's, the partial-observability encoder off / occlusion / every effect,
+    and the ego + nearest-objects encoder of example 09 as numba cfunc and Cython package."""
+    from selfplaydrive.obs import PaperEncoder, PartialObsEncoder
+    from selfplaydrive.testing.build import build_component_package
+
+    variants: dict[str, object] = {
+        "paper": PaperEncoder(),
+        "partial_off": PartialObsEncoder(),
+        "partial_occlusion": PartialObsEncoder(occlusion=True),
+        "partial_all": PartialObsEncoder(
+            occlusion=True, pos_std=0.5, heading_std=0.05, speed_std=0.3, p_miss=0.05, fp_rate=0.5
+        ),
+    }
+    try:
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location("example_09", ROOT / "examples" / "09_encoder_numba.py")
+        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+        sys.modules["example_09"] = module
+        spec.loader.exec_module(module)  # type: ignore[union-attr]
+        variants["ego_objects_numba"] = module.ego_objects_encoder(63, 100.0)
+    except ImportError as exc:
+        print(f"numba form skipped: {exc}", file=sys.stderr)
+    target = Path(tempfile.mkdtemp(prefix="bench_encoders_"))
+    build_component_package(ROOT / "examples" / "ego_objects_cython", target)
+    sys.path.insert(0, str(target))
+    from ego_objects_encoder import ego_objects_encoder  # type: ignore[import-not-found]
+
+    variants["ego_objects_cython"] = ego_objects_encoder(63, 100.0)
+    return variants
+
+
+def _time_encoder(road_map, encoder, args: argparse.Namespace) -> tuple[float, float]:
+    """(observation-stage ns, whole-step ns) per agent-step with `encoder`."""
+    from selfplaydrive.scenario.spawner import PaperSpawner
+    from selfplaydrive.sim.vec_env import VecEnv
+
+    env = VecEnv(
+        road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, obs=encoder, profile=True
+    )
+    acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
+    env.reset(0)
+    for k in range(args.warmup):
+        env.step(acts[k])
+    stage, step = [], []
+    for k in range(args.warmup, args.warmup + args.steps):
+        n = int(np.count_nonzero(env.masks))
+        o0, t0 = env.timings["observation"], time.perf_counter()
+        env.step(acts[k])
+        step.append((time.perf_counter() - t0) / n * 1e9)
+        stage.append((env.timings["observation"] - o0) / n * 1e9)
+    return float(np.median(stage)), float(np.median(step))
+
+
+def encoders(args: argparse.Namespace) -> dict[str, object]:
+    """Observation-stage cost per agent-step of each encoder, alternated over `args.rounds`."""
+    from selfplaydrive.maps.loader import load_map
+
+    road_map = load_map("default")
+    variants = _encoder_variants()
+    stage: dict[str, list[float]] = {k: [] for k in variants}
+    step: dict[str, list[float]] = {k: [] for k in variants}
+    for _ in range(args.rounds):
+        for name, enc in variants.items():
+            s, w = _time_encoder(road_map, enc, args)
+            stage[name].append(s)
+            step[name].append(w)
+    out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
+    base = statistics.median(stage["paper"])
+    for name in variants:
+        s = statistics.median(stage[name])
+        out[name] = {
+            "observation_stage_ns": s,
+            "step_ns": statistics.median(step[name]),
+            "vs_paper": s / base,
+        }
+    return out
+
+
 def _print(title: str, result: dict[str, object], as_json: bool) -> None:
     if as_json:
         print(json.dumps(result, indent=1))
@@ -223,7 +315,7 @@ def _print(title: str, result: dict[str, object], as_json: bool) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("what", choices=("overhead", "terms"))
+    p.add_argument("what", choices=("overhead", "terms", "encoders"))
     p.add_argument("--baseline", help="folder holding the baseline's built selfplaydrive package (overhead)")
     p.add_argument("--worlds", type=int, default=32, help="worlds (32 agent slots each)")
     p.add_argument("--threads", type=int, default=1)
@@ -236,6 +328,8 @@ def main(argv: list[str] | None = None) -> None:
         if not args.baseline:
             p.error("overhead needs --baseline")
         _print("overhead (paper configuration, this tree vs baseline)", overhead(args), args.json)
+    elif args.what == "encoders":
+        _print("observation stage per encoder", encoders(args), args.json)
     else:
         _print("cost of one extra reward column per form", terms(args), args.json)
 

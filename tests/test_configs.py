@@ -174,7 +174,7 @@ def _stub_env(cfg):
 
     from gymnasium.spaces import MultiDiscrete
 
-    from selfplaydrive.sim.layout import ObsLayout
+    from selfplaydrive.obs.layout import ObsLayout
 
     layout = ObsLayout(cfg.obs.max_objects, cfg.obs.max_road, 0)
     return SimpleNamespace(layout=layout, action_space=MultiDiscrete([7, 13]))

@@ -182,3 +182,13 @@ def test_06_08_speed_limit_term_runs(name, tmp_path):
     assert "reward columns of" in out and "  speed_limit " in out
     for term in TERMS:
         assert f"  {term} " in out, term
+
+
+# --- 09: an observation encoder of one's own ---------------------------------------------------
+def test_09_encoder_numba_selects_checks_and_trains(tmp_path):
+    pytest.importorskip("numba")
+    pytest.importorskip("torch")
+    out = run_example("09_encoder_numba.py", tmp_path)
+    assert "check_encoder: EncoderReport(name='ego_objects'" in out
+    assert "'road': (0, 8)" in out and "trained DeepSetsModel on obs=ego_objects" in out
+    assert "'updates': 2" in out

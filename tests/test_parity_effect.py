@@ -40,6 +40,7 @@ CONTEXTS = {
     ("reward", "paper"): [],
     ("reward", "eval"): [],
     ("obs", "paper"): [],
+    ("obs", "partial"): [],
     ("env", "default"): [],
     ("env/actions", "discrete"): [],
     ("env/actions", "continuous"): [],
@@ -103,6 +104,11 @@ KEY_SETTINGS = {
     # the first round's draws are one block: it shifts later draws only where the agents fill
     # before the block is used up (5 m apart: within about 40 candidates)
     "spawner.first_round_candidates": {"spawner.min_agent_distance": 5.0},
+    # obs=partial: a false positive's size shows only when there are false positives, and the
+    # encoder's seed only where something is drawn
+    "obs.fp_length": {"obs.fp_rate": 1.0},
+    "obs.fp_width": {"obs.fp_rate": 1.0},
+    "obs.seed": {"obs.p_miss": 0.3},
 }
 
 # Perturbations for values the generic rule (bool: flip; number: x0.5 or x2; list of numbers:

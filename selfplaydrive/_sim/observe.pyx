@@ -3,12 +3,12 @@
 only the observation stage writes `obs` (the env exposes it read-only), so a slot's rows past
 the count it wrote last time are still zero, and only the rows between the new and the old
 count are cleared (on average 38 of 63 object rows are padding: clearing them every step was
-~16 % of the observation's bytes). Layout and feature names: selfplaydrive/sim/layout.py. Every value is
+~16 % of the observation's bytes). Layout and feature names: selfplaydrive/obs/layout.py. Every value is
 scaled and clipped to [-1, 1]; positions and directions are in the ego frame (x forward,
 y left)."""
 
 from libc.stddef cimport ptrdiff_t
-from libc.stdint cimport int8_t, int32_t, int64_t
+from libc.stdint cimport int8_t, int32_t, int64_t, uintptr_t
 from libc.math cimport NAN
 from libc.string cimport memset
 from selfplaydrive._sim.common cimport (Sim, Params, Atlas, EGO_DIM, OBJ_DIM, ROAD_DIM,
@@ -35,6 +35,11 @@ cdef extern from "near.h" nogil:
     int spd_within(const float* bx, const float* by, int nb, float x0, float y0, float r2,
                    int skip, int32_t* out)
 
+def encoder_address():
+    """Address of `encode_paper` (an `sd_encoder_fn`, selfplaydrive_abi.h)."""
+    return <uintptr_t>encode_paper
+
+
 def _set_simd(int level):
     """Set this module's SIMD level (selfplaydrive._sim.simd_level); returns the level used."""
     return spd_simd_init(level)
@@ -49,8 +54,17 @@ cdef inline float clip(float v) noexcept nogil:
     return spd_clip(v)
 
 
-cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
-    """Write the observation row of every active agent of world `w`."""
+cdef void encode_paper(const Sim* sim, const Params* prm, const Atlas* atlas, const void* args,
+                       int32_t w, float* obs, int32_t stride) noexcept nogil:
+    """The paper's encoder (section 2.5) as a component of the ABI (`sd_encoder_fn`): rows of
+    world `w` at obs[a * stride]. It uses the world's scratch (cand, cand_d) and the row
+    counters obj_rows / road_rows, which the contract allows an encoder to write."""
+    observe_world(<Sim*>sim, atlas, prm, w, obs, stride)
+
+
+cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w, float* obs,
+                        int64_t stride) noexcept nogil:
+    """Write the observation row of every active agent of world `w` (row a at obs[a * stride])."""
     cdef int a, i, nb, own = 0
     cdef float* row
     cdef float* table = sim.cand_d + <int64_t>w * sim.cand_cap
@@ -59,7 +73,7 @@ cdef void observe_world(Sim* sim, const Atlas* atlas, const Params* prm, int w) 
     for a in range(sim.A):
         i = w * sim.A + a
         if sim.active[i]:
-            row = &sim.obs[<int64_t>i * sim.obs_dim]
+            row = obs + a * stride
             write_ego(sim, prm, i, row)
             write_objects(sim, prm, w, i, own, table, nb, row + EGO_DIM)
             write_road(sim, atlas, prm, w, i, row + EGO_DIM + sim.max_obj * OBJ_DIM)

@@ -9,7 +9,7 @@
  * Road record layout (sim/atlas.py `seg_rec`): mid x, mid y [m], dir x, dir y,
  * min(length / length_scale, 1), type / 4, length [m], signal group. The road events
  * (road.pyx) read the same records, so the lines they load are those the rows need next.
- * Road row layout (sim/layout.py ROAD_FEATURES): valid, dx, dy, cos_dir, sin_dir, length,
+ * Road row layout (obs/layout.py ROAD_FEATURES): valid, dx, dy, cos_dir, sin_dir, length,
  * type, light_state; dx, dy in the ego frame divided by pos_scale.
  * Object record (observe.pyx `body_table`): x, y, cos, sin, vx, vy [world frame],
  * length / length_scale, width / width_scale (both clipped). Object row: valid, dx, dy, cos,

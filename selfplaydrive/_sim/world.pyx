@@ -10,12 +10,27 @@ import numpy as np
 cimport numpy as cnp
 from cython.parallel cimport prange
 from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t, uintptr_t
-from selfplaydrive._sim.common cimport Sim, Params, Atlas, MAX_TERMS, reward_term_fn
+from selfplaydrive._sim.common cimport Sim, Params, Atlas, MAX_TERMS, reward_term_fn, encoder_fn
 from selfplaydrive._sim.physics cimport physics_world
 from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world
 from selfplaydrive._sim.road cimport road_world
 from selfplaydrive._sim.reward cimport TermSlot, reward_world, finalize_world
-from selfplaydrive._sim.observe cimport observe_world
+
+# ---- observation encoder component (issue #13) ----
+from selfplaydrive._sim.observe cimport encode_paper
+
+ctypedef struct EncoderSlot:
+    # The selected observation encoder (internal to the step, not part of the ABI).
+    encoder_fn fn            # NULL: a Python encoder fills the rows after the step
+    const void* args         # the encoder's own parameters (NULL when none)
+
+
+cdef inline void encode_world(Sim* sim, const Atlas* atlas, const Params* prm,
+                              const EncoderSlot* enc, int w) noexcept nogil:
+    """The observation stage of world `w`: one call of the selected encoder (section 2.5)."""
+    if enc.fn != NULL:
+        enc.fn(sim, prm, atlas, enc.args, w, sim.obs + <int64_t>w * sim.A * sim.obs_dim, sim.obs_dim)
+# ---- end observation encoder component ----
 
 cnp.import_array()
 
@@ -35,18 +50,19 @@ cdef void* ptr(dict arrays, str name, object dtype, list keep) except NULL:
 
 
 cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, const TermSlot* slots,
-                   int w) noexcept nogil:
+                   const EncoderSlot* enc, int w) noexcept nogil:
     """The whole chain for world `w` (section 2): physics, events, reward, observation."""
     physics_world(sim, prm, w)
     lights_peds_world(sim, prm, w)
     collisions_world(sim, prm, w)
     road_world(sim, atlas, prm, w)
     reward_world(sim, atlas, prm, slots, w)
-    observe_world(sim, atlas, prm, w)
+    encode_world(sim, atlas, prm, enc, w)
     finalize_world(sim, prm, w)
 
 
-cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noexcept nogil:
+cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, const EncoderSlot* enc,
+                    int w) noexcept nogil:
     """After packing a new scenario into world `w`: place pedestrians, gather road data, observe."""
     cdef int a, i, k
     peds_world(sim, prm, w)
@@ -59,7 +75,7 @@ cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, int w) noex
     for a in range(sim.A):
         i = w * sim.A + a
         sim.events[i] = 0  # events found while placing the scenario earn nothing
-    observe_world(sim, atlas, prm, w)
+    encode_world(sim, atlas, prm, enc, w)
 
 
 cdef class World:
@@ -75,16 +91,21 @@ cdef class World:
             (a Python column, or one a group written earlier fills), its float32 parameters
             (or None), its weight, and 1 when the step fills it (0: Python, after the step).
             rewards/components.py `LinearReward.plan` makes them and checks the addresses.
+        encoder: (address, args) of the observation encoder: the address of an `sd_encoder_fn`
+            (0: none, a Python encoder fills the rows after the step) and its parameters as a
+            C-contiguous NumPy array passed as `const void*` (or None). obs/encoders.py
+            `KernelEncoder.plan` makes it. None: the paper's encoder.
     """
 
     cdef Sim sim
     cdef Atlas atlas
     cdef Params prm
     cdef TermSlot slots[MAX_TERMS]
+    cdef EncoderSlot enc
     cdef list keep
     cdef public dict timings
 
-    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms):
+    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms, encoder=None):
         self.keep = []
         self.timings = {name: 0.0 for name in STAGES + ("reset",)}
         self._bind_dims(dims)
@@ -93,6 +114,23 @@ cdef class World:
         self._bind_atlas(atlas)
         self._bind_params(params)
         self._bind_terms(terms, state)
+        self._bind_encoder(encoder)
+
+    def _bind_encoder(self, encoder):
+        """Select the observation encoder component (one function pointer and its args)."""
+        cdef uintptr_t address
+        if encoder is None:  # the paper's encoder (section 2.5)
+            self.enc.fn = encode_paper
+            self.enc.args = NULL
+            return
+        address, args = encoder
+        self.enc.fn = <encoder_fn>address
+        self.enc.args = NULL
+        if args is not None:
+            if not isinstance(args, np.ndarray) or not args.flags.c_contiguous or args.nbytes == 0:
+                raise TypeError(f"encoder args: expected a non-empty C-contiguous array, got {args!r}")
+            self.keep.append(args)
+            self.enc.args = <const void*>cnp.PyArray_DATA(args)
 
     def _bind_terms(self, list terms, dict s):
         """Fill the component table of the reward stage (one slot per column)."""
@@ -233,7 +271,7 @@ cdef class World:
             # neighbouring worlds (whose per-slot bytes share cache lines) mostly stay on one
             # thread. Results do not depend on which thread steps a world.
             for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=chunk):
-                step_one(&self.sim, &self.atlas, &self.prm, self.slots, w)
+                step_one(&self.sim, &self.atlas, &self.prm, self.slots, &self.enc, w)
 
     def _step_profiled(self, int num_threads):
         cdef int w, W = self.sim.W
@@ -254,7 +292,7 @@ cdef class World:
         t3 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
-                observe_world(&self.sim, &self.atlas, &self.prm, w)
+                encode_world(&self.sim, &self.atlas, &self.prm, &self.enc, w)
         t4 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
@@ -262,6 +300,14 @@ cdef class World:
         t5 = time.perf_counter()
         for name, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4)):
             self.timings[name] += dt
+
+    def encode(self, int num_threads=1):
+        """Run only the observation encoder on every world, as the step does (the encoder
+        checker, selfplaydrive/testing/check_encoder.py, compares the buffers around it)."""
+        cdef int w, W = self.sim.W
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                encode_world(&self.sim, &self.atlas, &self.prm, &self.enc, w)
 
     def after_reset(self, cnp.ndarray worlds, int num_threads=1):
         """Finish the reset of the listed worlds (int32 indices) after their scenario was packed."""
@@ -272,7 +318,7 @@ cdef class World:
                 raise IndexError(f"world index {ws[k]} out of range [0, {self.sim.W})")
         with nogil:
             for k in prange(n, num_threads=num_threads, schedule="static"):
-                reset_one(&self.sim, &self.atlas, &self.prm, ws[k])
+                reset_one(&self.sim, &self.atlas, &self.prm, &self.enc, ws[k])
 
 
 ctypedef fused action_int:

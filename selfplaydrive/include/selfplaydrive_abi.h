@@ -1,6 +1,7 @@
 /* selfplaydrive component ABI: the typed view of the simulator state that kernels and
- * plug-in components read (paper section 2), and the signature of a reward-term component
- * (section 2.3). docs/components.md "Write a reward term" explains the contract.
+ * plug-in components read (paper section 2), and the signatures of a reward-term component
+ * (section 2.3) and of an observation encoder (section 2.5). docs/components.md "Write a reward
+ * term" and "Write an observation encoder" explain the contracts.
  *
  * Include with the folder of `selfplaydrive.get_include()` on the include path; Cython code
  * cimports the same declarations from `selfplaydrive_abi.pxd` in that folder.
@@ -266,5 +267,26 @@ typedef struct sd_sim {
  * no global state, no allocation, no Python. */
 typedef void (*sd_reward_term_fn)(const sd_sim* sim, const sd_params* prm, const sd_atlas* atlas,
                                   const float* args, int32_t w, float* out, int32_t stride);
+
+/* ---- observation encoders (issue #13; docs/components.md "Write an observation encoder") ----
+ * Appended in ABI version 1 (no field of the structs above changed, so the version stays).
+ *
+ * An observation encoder (section 2.5) writes the observation row of every active agent slot of
+ * world `w`: row a (slot a in [0, sim->A)) is obs[a * stride .. a * stride + sim->obs_dim), with
+ * `obs` the world's first row (&sim->obs[w * A * obs_dim]) and `stride` = sim->obs_dim. Rows of
+ * inactive slots (sim->active[w * A + a] == 0) must be left alone (they keep the agent's last
+ * observation, which final_obs copies). It reads the state through `sim` (including the road
+ * gather of the events stage: road_idx[i, :road_n[i]], atlas positions of the max_road nearest
+ * segments within obs_radius), the constants through `prm` (obs_radius = pos_scale, the
+ * feature scales), the map through `atlas`, and its own parameters through `args` (whatever
+ * the encoder's Python object packed: `KernelEncoder(args=...)`, NULL when none). Besides its
+ * rows it may write only the world's scratch, cand[w * cand_cap ..] and cand_d[w * cand_cap ..]
+ * (contents undefined on entry and after the call), and the per-slot row counters obj_rows and
+ * road_rows of the world's slots (the paper encoder's record of which rows hold objects and
+ * segments, so it clears only the padding that changed). Called once per world inside the
+ * parallel step and after a reset, without the GIL, possibly from several threads for
+ * different worlds: no global state, no allocation, no Python. */
+typedef void (*sd_encoder_fn)(const sd_sim* sim, const sd_params* prm, const sd_atlas* atlas,
+                              const void* args, int32_t w, float* obs, int32_t stride);
 
 #endif /* SELFPLAYDRIVE_ABI_H */

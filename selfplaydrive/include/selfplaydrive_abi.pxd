@@ -214,3 +214,8 @@ cdef extern from "selfplaydrive_abi.h" nogil:
     ctypedef void (*reward_term_fn "sd_reward_term_fn")(const Sim* sim, const Params* prm, const Atlas* atlas,
                                                       const float* args, int32_t w, float* out,
                                                       int32_t stride) noexcept nogil
+
+    # ---- observation encoders (docs/components.md "Write an observation encoder") ----
+    ctypedef void (*encoder_fn "sd_encoder_fn")(const Sim* sim, const Params* prm, const Atlas* atlas,
+                                               const void* args, int32_t w, float* obs,
+                                               int32_t stride) noexcept nogil

@@ -21,7 +21,7 @@ from typing import Protocol, runtime_checkable
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.maps.roadmap import SegmentType
-from selfplaydrive.sim.layout import EGO_FEATURES, ObsLayout
+from selfplaydrive.obs.layout import EGO_FEATURES, ObsLayout
 
 with requires_extra("torch"):
     import torch

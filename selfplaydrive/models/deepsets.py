@@ -24,7 +24,7 @@ from selfplaydrive.models.common import (
     middle_prior_bias,
     reset_state,
 )
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 
 with requires_extra("torch"):
     import torch
@@ -120,9 +120,16 @@ class DeepSetsModel(nn.Module):
             objects, obj_valid = compact_sets(objects, obj_valid)
             road, road_valid = compact_sets(road, road_valid)
         ego = self.ego_encoder(parts["ego"])
-        obj = encode_max(self.object_encoder, objects, obj_valid, self.input_size)
-        rd = encode_max(self.road_encoder, road, road_valid, self.input_size)
+        obj = self._pool(self.object_encoder, objects, obj_valid, ego)
+        rd = self._pool(self.road_encoder, road, road_valid, ego)
         return self.shared(torch.cat([ego, obj, rd], dim=1))
+
+    def _pool(self, encoder: nn.Module, x: Tensor, valid: Tensor, ego: Tensor) -> Tensor:
+        """Max-pooled embedding of one set; zeros for a block the encoder's layout leaves empty
+        (e.g. an encoder without road rows, obs/encoders.py)."""
+        if x.shape[1] == 0:
+            return ego.new_zeros(ego.shape[0], self.input_size)
+        return encode_max(encoder, x, valid, self.input_size)
 
     def forward(self, obs: Tensor, state: State, episode_start: Tensor) -> tuple[Tensor, Tensor, State]:
         """One step for a batch of agents.

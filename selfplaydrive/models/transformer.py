@@ -23,7 +23,7 @@ from selfplaydrive.models.common import (
     middle_prior_bias,
     mlp,
 )
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 
 with requires_extra("torch"):
     import torch
@@ -187,7 +187,7 @@ class TransformerModel(nn.Module):
         x = torch.cat([ego, obj, rd], dim=1)
         gamma, beta = self.film(parts["coef"]).unsqueeze(1).chunk(2, dim=-1)
         x = x * (1.0 + gamma) + beta
-        ego_valid = torch.ones_like(obj_valid[:, :1])
+        ego_valid = obj_valid.new_ones(obj_valid.shape[0], 1)  # also for a layout without objects
         return x, torch.cat([ego_valid, obj_valid, road_valid], dim=1)
 
     def embed(self, obs: Tensor) -> Tensor:

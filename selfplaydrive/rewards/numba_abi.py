@@ -107,6 +107,11 @@ SIGNATURE = types.void(
     types.int32,
 )
 
+# sd_encoder_fn (observation encoders, docs/components.md "Write an observation encoder"): the
+# same numba types, `args` (the C `const void*`) seen as float32 parameters and `out` the
+# world's first observation row (row a at out[a * stride])
+ENCODER_SIGNATURE = SIGNATURE
+
 
 @intrinsic
 def _load(typingctx, base, offset, dtype):  # type: ignore[no-untyped-def]

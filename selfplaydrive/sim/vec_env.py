@@ -34,13 +34,14 @@ from selfplaydrive._sim.world import STAGES, World, copy_discrete
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
+from selfplaydrive.obs.encoders import Encoder, KernelEncoder, as_encoder
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
 from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
 from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
-from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.params import SimParams
 
 _FAST_ACTION_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
@@ -64,7 +65,10 @@ class VecEnv:
             steps rigid bodies in Python before the kernels (ablations, slow).
         actions: `DiscreteActions()` (default, section 2.4) or `ContinuousActions()`.
         params: `SimParams` (default: the paper's constants).
-        obs: `ObsConfig` (63 objects, 200 road segments within 100 m).
+        obs: The observation encoder (section 2.5; obs/encoders.py): `PaperEncoder` (the
+            default: 63 objects, 200 road segments within 100 m), an `ObsConfig` (the paper
+            encoder of those sizes), `PartialObsEncoder`, a `KernelEncoder` (numba, Cython) or
+            a Python encoder, which replaces the compiled one. `layout` is the encoder's.
         seed: Seed of the first `reset`.
         num_threads: OpenMP threads stepping the worlds (results do not depend on it), at
             most `MAX_THREADS`.
@@ -91,7 +95,7 @@ class VecEnv:
         physics: BicycleModel | None = None,
         actions: DiscreteActions | ContinuousActions | None = None,
         params: SimParams | None = None,
-        obs: ObsConfig | None = None,
+        obs: ObsConfig | Encoder | None = None,
         seed: int | None = 0,
         num_threads: int = 1,
         terminated_vehicle: str = "remove",
@@ -121,16 +125,30 @@ class VecEnv:
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = actions if actions is not None else DiscreteActions()
         self.params = params if params is not None else SimParams()
-        self.obs_config = obs if obs is not None else ObsConfig()
+        # ---- observation encoder (issue #13) ----
+        self.encoder = as_encoder(obs)
+        self._kernel_encoder = isinstance(self.encoder, KernelEncoder)
+        enc_layout = self.encoder.layout
+        road_gather = (
+            self.encoder.road_gather
+            if isinstance(self.encoder, KernelEncoder)
+            else max(enc_layout.max_road, 1)
+        )
+        # the sizes the kernels see (obs_radius, the road gather), as before the encoders
+        self.obs_config = ObsConfig(
+            max(enc_layout.max_objects, 1), int(road_gather or 1), float(self.encoder.radius)
+        )
+        # ---- end observation encoder ----
         self.num_threads = num_threads
         self.terminated_vehicle = terminated_vehicle
         self.reward_hooks = list(reward_hooks)
         self.reward = _reward(reward).with_hooks(self.reward_hooks)
         self.obs_hooks = list(obs_hooks)
         self.profile = bool(profile)
-        self.layout = ObsLayout(
-            self.obs_config.max_objects, self.obs_config.max_road, sum(int(h.dim) for h in self.obs_hooks)
+        self.layout = dataclasses.replace(
+            enc_layout, extra_dim=enc_layout.extra_dim + sum(int(h.dim) for h in self.obs_hooks)
         )
+        self._encoder_dim = enc_layout.obs_dim  # columns the encoder writes (hooks follow)
         self._seed = seed
         # world 0's generator alone first: the first scenario gives the buffer sizes, which
         # are checked against the memory before num_worlds generators are made
@@ -143,9 +161,9 @@ class VecEnv:
             first,
             self.num_worlds,
             G,
-            self.obs_config.max_objects,
+            enc_layout.max_objects,
             self.obs_config.max_road,
-            p.cand_cap,
+            max(p.cand_cap, self.encoder.scratch if isinstance(self.encoder, KernelEncoder) else 0),
             self.layout.obs_dim,
         )
         self.dims = dataclasses.replace(self.dims, num_terms=len(self.reward.columns))
@@ -154,7 +172,12 @@ class VecEnv:
         self.buffers = allocate(self.dims)
         self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
         self._world = World(
-            self.dims.__dict__, self.buffers, self.atlas, self._kernel_params(), self.reward.plan()
+            self.dims.__dict__,
+            self.buffers,
+            self.atlas,
+            self._kernel_params(),
+            self.reward.plan(),
+            self.encoder.plan() if isinstance(self.encoder, KernelEncoder) else (0, None),
         )
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
@@ -241,7 +264,7 @@ class VecEnv:
         self.truncations[:] = False
         self.rewards[:] = 0.0
         self.reward_terms[:] = 0.0
-        self._run_obs_hooks(None)
+        self._run_python_obs(None)
         return self.observations
 
     def step(self, actions: np.ndarray) -> None:
@@ -263,14 +286,14 @@ class VecEnv:
             self._report_compiled_terms()
         if self._python_columns:
             self._run_python_terms()
-        if self.obs_hooks:
-            self._run_obs_hooks(self.terminations | self.truncations)
+        if self.obs_hooks or not self._kernel_encoder:
+            self._run_python_obs(self.terminations | self.truncations)
         if not self.buffers["done"].any():
             return  # no per-world Python work on the common path
         done = np.flatnonzero(self.buffers["done"]).astype(np.int32)
         self._record_episodes(done)
         self._reset_worlds(done)
-        self._run_obs_hooks(None)
+        self._run_python_obs(None)
 
     def _copy_discrete_fast(self, actions: object) -> bool:
         """Check and copy discrete actions of the usual kinds (C-contiguous int32/int64) in one
@@ -346,8 +369,28 @@ class VecEnv:
             self.rewards += r
             b["term_sum"][:, k] += r.reshape(self.num_worlds, self.dims.A).sum(axis=1, dtype=np.float64)
 
-    def _run_obs_hooks(self, ended: np.ndarray | None) -> None:
-        col = self.layout.kernel_dim
+    def _run_python_obs(self, ended: np.ndarray | None) -> None:
+        """A Python encoder's rows (it replaces the compiled one), then the hooks' columns, for
+        the active slots and, after a step, those that `ended` (their final observations)."""
+        rows = self.masks if ended is None else (self.masks | ended)
+        if not self._kernel_encoder:
+            enc = self.encoder
+            assert not isinstance(enc, KernelEncoder)  # _kernel_encoder is False
+            d = self._encoder_dim
+            f = np.asarray(enc(self.state), dtype=np.float32)
+            if f.shape != (self.num_agents, d):
+                raise ValueError(
+                    f"encoder {enc.name!r}: expected an output of shape ({self.num_agents}, {d}) "
+                    f"(layout.obs_dim of {enc.layout}), got {f.shape}"
+                )
+            bad = ~np.isfinite(f[rows]).all(axis=1)
+            if bad.any():
+                i = int(np.flatnonzero(rows)[np.flatnonzero(bad)[0]])
+                raise ValueError(f"encoder {enc.name!r}: non-finite values in the row of agent slot {i}")
+            self.buffers["obs"][rows, :d] = f[rows]
+            if ended is not None:
+                self.buffers["final_obs"][ended, :d] = f[ended]
+        col = self._encoder_dim
         for hook in self.obs_hooks:
             f = np.asarray(hook(self.state), dtype=np.float32)
             if f.shape != (self.num_agents, hook.dim) or not np.all(np.isfinite(f)):
@@ -355,7 +398,6 @@ class VecEnv:
                     f"obs hook {hook.name!r}: expected ({self.num_agents}, {hook.dim}) finite values, "
                     f"got {f.shape}"
                 )
-            rows = self.masks if ended is None else (self.masks | ended)
             self.buffers["obs"][rows, col : col + hook.dim] = f[rows]
             if ended is not None:
                 self.buffers["final_obs"][ended, col : col + hook.dim] = f[ended]

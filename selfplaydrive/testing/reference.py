@@ -344,7 +344,7 @@ def road_rows(
 def ego_row(
     b: dict[str, np.ndarray], dims, i: int, coeff_scale, max_speed: float = 40.0, wp_scale: float = 200.0
 ) -> np.ndarray:
-    """The 19 ego features of agent i (sim/layout.py EGO_FEATURES)."""
+    """The 19 ego features of agent i (obs/layout.py EGO_FEATURES)."""
     x, y, h = float(b["x"][i]), float(b["y"][i]), float(b["heading"][i])
     c, s = math.cos(h), math.sin(h)
     k, n = int(b["wp_idx"][i]), int(b["num_wp"][i])

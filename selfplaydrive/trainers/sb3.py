@@ -33,7 +33,7 @@ from gymnasium import spaces
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.models.common import ObsSplitter, compact_sets, masked_max, mlp
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 
 with requires_extra("torch"):

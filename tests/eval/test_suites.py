@@ -27,8 +27,8 @@ from selfplaydrive.eval.suites.geometry import point_at, project
 from selfplaydrive.eval.suites.stop_lines import classify_stop_line, constant_speed_collision
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.maps.roadmap import SegmentType
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.sim.actions import ContinuousActions
-from selfplaydrive.sim.layout import ObsLayout
 from selfplaydrive.sim.vec_env import VecEnv
 
 

@@ -5,7 +5,7 @@ import torch
 
 from selfplaydrive.models import DeepSetsModel, TransformerModel
 from selfplaydrive.models.common import middle_prior_bias
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 
 
 def test_bias_values_by_hand():

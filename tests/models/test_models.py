@@ -20,7 +20,7 @@ from selfplaydrive.models import (
     sample_actions,
 )
 from selfplaydrive.models.common import ObsSplitter, compact_sets
-from selfplaydrive.sim.layout import EGO_FEATURES, ObsLayout
+from selfplaydrive.obs.layout import EGO_FEATURES, ObsLayout
 
 SMALL = ObsLayout(max_objects=6, max_road=10)
 MODELS = [DeepSetsModel, TransformerModel]

@@ -10,7 +10,7 @@ from torch import nn
 
 from selfplaydrive.models import DeepSetsModel, TransformerModel
 from selfplaydrive.models.common import encode_max, few_winners, masked_max
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 
 LAYOUT = ObsLayout(max_objects=6, max_road=40)
 

@@ -16,7 +16,7 @@ from omegaconf import OmegaConf
 
 from selfplaydrive.builder import compose
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.sim.layout import ObsLayout
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers.sb3 import DeepSetsExtractor, SB3Trainer
 
 TINY_ENV = (

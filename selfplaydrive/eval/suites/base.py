@@ -22,10 +22,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from selfplaydrive.maps.roadmap import RoadMap, SegmentType
+from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS
 from selfplaydrive.scenario.types import Scenario
-from selfplaydrive.sim.layout import ObsLayout
 
 AGENT_SLOTS = 2  # A: the ego, and the second vehicle of the stop-line suite
 STATIC_SLOTS = 1  # S: always invalid (the kernels want at least one slot of each kind)
@@ -202,7 +202,7 @@ class FixedScenarioSpawner:
 def hide_stop_lines(obs: np.ndarray, layout: ObsLayout) -> np.ndarray:
     """Copy of `obs` with every STOP_LINE road row set to padding (all zeros, valid 0).
 
-    The kernel writes the road type as `SegmentType / 4` (sim/layout.py), so stop-line rows
+    The kernel writes the road type as `SegmentType / 4` (obs/layout.py), so stop-line rows
     carry 0.5 in the type column. Rows are blanked in place, not compacted: a model must
     treat padding wherever it appears (the valid column), which every model here does.
     """
