@@ -19,7 +19,8 @@ terms      The cost of one extra term column in each form: a built-in term of si
            per-step times, then of rounds).
 
 Usage:
-    python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--json]
+    python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--stage physics]
+        [--json]
     python benchmarks/bench_components.py terms [--rounds 5] [--json]
 Run pinned (taskset -c 0) on an otherwise idle machine; both default to one thread.
 """
@@ -50,6 +51,7 @@ from selfplaydrive.maps.loader import load_map
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim.vec_env import VecEnv
 worlds, threads, steps, warmup = (int(a) for a in sys.argv[1:5])
+stage_name = sys.argv[5] if len(sys.argv) > 5 else "reward"
 env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=threads)
 acts = np.random.default_rng(0).integers(0, [7, 13], size=(steps + warmup, env.num_agents, 2))
 env.reset(0)
@@ -72,9 +74,9 @@ for k in range(warmup):
 stage = []
 for k in range(warmup, warmup + steps):
     m = int(np.count_nonzero(env.masks))
-    r0 = env.timings["reward"]
+    r0 = env.timings[stage_name]
     env.step(acts[k])
-    stage.append((env.timings["reward"] - r0) / m * 1e9)
+    stage.append((env.timings[stage_name] - r0) / m * 1e9)
 import selfplaydrive
 print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "median_step_ns": float(np.median(per_step)),
                   "median_reward_stage_ns": float(np.median(stage)), "package": selfplaydrive.__file__}))
@@ -91,6 +93,7 @@ def _child(tree: Path, args: argparse.Namespace) -> dict[str, float]:
         str(args.threads),
         str(args.steps),
         str(args.warmup),
+        args.stage,
     ]
     with tempfile.TemporaryDirectory() as tmp:  # no source tree in the working directory
         out = subprocess.run(cmd, cwd=tmp, env=env, capture_output=True, text=True, check=True).stdout
@@ -114,7 +117,9 @@ def overhead(args: argparse.Namespace) -> dict[str, object]:
             "agent_steps_per_cpu_s": statistics.median(x["agent_steps"] / x["cpu"] for x in rs),
             "agent_steps_per_s": statistics.median(x["agent_steps"] / x["wall"] for x in rs),
             "median_step_ns_per_agent": statistics.median(x["median_step_ns"] for x in rs),
+            # the stage chosen by --stage (the key keeps its name: reward is the default)
             "median_reward_stage_ns_per_agent": statistics.median(x["median_reward_stage_ns"] for x in rs),
+            "stage": args.stage,
         }
     pairs = zip(runs["baseline"], runs["components"], strict=True)
     ratios = [(b["agent_steps"] / b["cpu"]) / (c["agent_steps"] / c["cpu"]) for b, c in pairs]
@@ -230,6 +235,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--steps", type=int, default=300, help="timed steps per run")
     p.add_argument("--warmup", type=int, default=30)
     p.add_argument("--rounds", type=int, default=6, help="alternations")
+    p.add_argument(
+        "--stage",
+        default="reward",
+        choices=("physics", "events", "reward", "observation", "finalize"),
+        help="stage timed alone in the overhead's profile run (physics: the physics components' cost)",
+    )
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if args.what == "overhead":
