@@ -124,6 +124,12 @@ class PhysicsModel:
                 f"physics {self.name!r}: expects {want} action columns"
                 f"{' ' + str(self.actions.names) if self.actions is not None else ''}, got {table.dim}"
             )
+        if self.actions is not None and tuple(table.names) != tuple(self.actions.names):
+            # e.g. the paper's acceleration table given to a model that reads changes of it
+            raise ConfigError(
+                f"physics {self.name!r}: reads actions {tuple(self.actions.names)}, got a table of "
+                f"{tuple(table.names)}; set the model's own tables in its parameters (physics.model)"
+            )
         return table
 
     def describe(self) -> str:

@@ -152,8 +152,8 @@ class JerkBicycleModel(PhysicsModel):
         from selfplaydrive.sim.actions import DiscreteActions  # sim/ imports physics/
 
         try:
-            self.actions = DiscreteActions(
-                accel_deltas, steer_deltas_deg, ("d_accel", "d_steer"), ("m/s^2 per step", "rad per step")
+            self.actions = DiscreteActions(accel_deltas, steer_deltas_deg).labelled(
+                ("d_accel", "d_steer"), ("m/s^2 per step", "rad per step")
             )
         except ValueError as exc:
             raise ConfigError(f"physics.accel_deltas / steer_deltas_deg: {exc}") from None

@@ -17,8 +17,10 @@ class DiscreteActions:
     Args:
         accel: Acceleration values [m/s^2] (7 in the paper).
         steer_deg: Steering angles [deg], positive = left (13 in the paper).
-        names: What the two columns mean to the physics model (a jerk-limited model reads the
-            tables as changes: physics/models.py `JerkBicycleModel`).
+
+    Attributes:
+        names: What the two columns mean to the physics model: ("accel", "steer"), or another
+            model's meaning (`JerkBicycleModel` reads the tables as changes; `labelled`).
         units: Units of the table values as the kernels receive them.
     """
 
@@ -29,14 +31,17 @@ class DiscreteActions:
         self,
         accel: Sequence[float] = ACCEL_VALUES,
         steer_deg: Sequence[float] = STEER_DEGREES,
-        names: Sequence[str] = ("accel", "steer"),
-        units: Sequence[str] = ("m/s^2", "rad"),
     ) -> None:
         self.accel = _table(accel, "accel")
         self.steer = np.deg2rad(_table(steer_deg, "steer_deg")).astype(np.float32)
         if np.any(np.abs(self.steer) >= np.pi / 2):
             raise ValueError(f"steer_deg: every angle must lie in (-90, 90) degrees, got {list(steer_deg)}")
+        self.names, self.units = ("accel", "steer"), ("m/s^2", "rad")
+
+    def labelled(self, names: Sequence[str], units: Sequence[str]) -> DiscreteActions:
+        """This table with the column names and units of another physics model (returns self)."""
         self.names, self.units = _labels(names, units, 2)
+        return self
 
     @property
     def space(self) -> gym.spaces.MultiDiscrete:

@@ -191,6 +191,10 @@ class VecEnv:
         k["accel_table"] = np.ascontiguousarray(self.action_table.accel, dtype=np.float32)
         k["steer_table"] = np.ascontiguousarray(self.action_table.steer, dtype=np.float32)
         k["obstacle_mode"] = int(self.terminated_vehicle == "obstacle")
+        # the physics model's own parameters (World takes them with its address; listed here so
+        # that everything the kernels read is in one place, tests/test_parity_effect.py)
+        args = self.physics.physics_slot()[1]
+        k["physics_args"] = args if args is not None else np.zeros(0, dtype=np.float32)
         return k
 
     def _expose(self) -> None:

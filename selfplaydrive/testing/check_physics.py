@@ -109,7 +109,8 @@ def check_physics(
             if moved.any():
                 i = int(np.argmax(moved))
                 raise PhysicsCheckError(
-                    f"physics {name!r}: changed {k}[{i}] of an inactive slot ({before[k][i]} -> {after[k][i]})"
+                    f"physics {name!r}: changed {k}[{i}] of an inactive slot "
+                    f"({before[k][i]} -> {after[k][i]})"
                 )
         _check_values(name, before, after, active, dt, max_speed)
         if active.any():

@@ -9,6 +9,8 @@ import numpy as np
 
 from selfplaydrive.testing.reference import bicycle_step
 
+MAX_STEER = float(np.deg2rad(38.0))  # [rad], JerkBicycleModel's default bound
+
 
 def jerk_step(
     x,
@@ -23,7 +25,7 @@ def jerk_step(
     hidden,
     dt=0.1,
     max_accel=4.0,
-    max_steer=np.deg2rad(38.0),
+    max_steer=MAX_STEER,
     friction=True,
     wheelbase_ratio=0.6,
     max_speed=40.0,
