@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from selfplaydrive._sim.spatial import query_radius_batch
 
+from selfplaydrive._sim.spatial import query_radius_batch
 from selfplaydrive.errors import MapError
 from selfplaydrive.maps import LaneElement, MapElements, SegmentType, compile_map
 from selfplaydrive.maps.compile import cut_polyline
