@@ -228,3 +228,38 @@ def test_09_unicycle_hand_computed():
     on &= env.masks
     turned = np.angle(np.exp(1j * (b["heading"] - h0)))[on]
     np.testing.assert_allclose(turned, np.deg2rad(10.0), atol=1e-5)
+
+
+# --- 10: the same physics model in Cython, as its own package ---------------------------------
+def test_10_physics_cython_runs(tmp_path):
+    out = run_example("10_physics_cython.py", tmp_path)
+    assert "check_physics: passed" in out and "unicycle (cython):" in out
+
+
+def test_10_cython_package_matches_the_numba_model_and_loads_by_name(tmp_path, monkeypatch):
+    """Built against get_include(), the package's model is selected by `load_physics` (what
+    `physics=custom physics.model.target=unicycle_physics:unicycle` calls) and drives the same
+    rollout as example 09's numba cfunc, to float32 rounding."""
+    from selfplaydrive import make_env
+    from selfplaydrive.physics import load_physics
+    from selfplaydrive.testing.build import build_component_package
+
+    build_component_package(EXAMPLES / "unicycle_cython", tmp_path / "pkg")
+    monkeypatch.syspath_prepend(str(tmp_path / "pkg"))
+    model = load_physics("unicycle_physics:unicycle")
+    assert model.form == "cython" and model.actions.names == ("accel", "yaw_rate")
+    envs = [make_env("default", num_worlds=2, physics=model, seed=0)]
+    if importlib.util.find_spec("numba") is not None:
+        envs.append(
+            make_env("default", num_worlds=2, physics=load_example("09_physics_numba.py").unicycle(), seed=0)
+        )
+    rng = np.random.default_rng(0)
+    for env in envs:
+        env.reset(seed=0)
+    for _ in range(30):
+        a = np.stack([rng.integers(0, 7, envs[0].num_agents), rng.integers(0, 9, envs[0].num_agents)], axis=1)
+        for env in envs:
+            env.step(a)
+    for env in envs[1:]:
+        np.testing.assert_allclose(env.buffers["x"], envs[0].buffers["x"], atol=1e-3)
+        np.testing.assert_allclose(env.buffers["speed"], envs[0].buffers["speed"], atol=1e-4)

@@ -269,7 +269,8 @@ class VecEnv:
         return self.observations
 
     def step(self, actions: np.ndarray) -> None:
-        """Apply `actions` ((N, 2): int indices for discrete, float32 for continuous) to every
+        """Apply `actions` ((N, D): int indices for discrete, float32 for continuous; D = 2 unless
+        the physics model declares other action columns, `action_table.dim`) to every
         agent, step all worlds, autoreset ended worlds. Results are in the env's buffers.
 
         Raises:

@@ -381,3 +381,12 @@ def test_numba_form_with_state_and_args():
         env.step(np.zeros((env.num_agents, 2), np.int64))
     on &= env.masks
     assert np.all(env.buffers["phys_state"][on, 0] == 5.0)
+
+
+@pytest.mark.parametrize("model", [JerkBicycleModel(), DeltaModel(max_backward=0.5)], ids=["jerk", "delta"])
+def test_new_models_same_seed_same_rollout_at_1_and_2_threads(model):
+    from selfplaydrive.builder import make_env
+    from selfplaydrive.testing.digest import rollout_digest
+
+    digests = {rollout_digest(make_env("default", num_worlds=4, physics=model, num_threads=t), 120) for t in (1, 2)}
+    assert len(digests) == 1
