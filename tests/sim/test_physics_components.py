@@ -388,5 +388,7 @@ def test_new_models_same_seed_same_rollout_at_1_and_2_threads(model):
     from selfplaydrive.builder import make_env
     from selfplaydrive.testing.digest import rollout_digest
 
-    digests = {rollout_digest(make_env("default", num_worlds=4, physics=model, num_threads=t), 120) for t in (1, 2)}
+    digests = {
+        rollout_digest(make_env("default", num_worlds=4, physics=model, num_threads=t), 120) for t in (1, 2)
+    }
     assert len(digests) == 1

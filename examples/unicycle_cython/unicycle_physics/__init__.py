@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from selfplaydrive.physics import KernelPhysics
 from selfplaydrive.sim.actions import DiscreteActions
-
 from unicycle_physics import _kernel
 
 ACCEL = (-4.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0)  # [m/s^2]
