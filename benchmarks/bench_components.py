@@ -23,7 +23,8 @@ encoders   The observation stage per agent-step of each observation encoder (pap
            example 09 as numba cfunc and Cython package), `VecEnv(profile=True)`, alternated.
 
 Usage:
-    python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--json]
+    python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--stage physics]
+        [--json]
     python benchmarks/bench_components.py terms [--rounds 5] [--json]
     python benchmarks/bench_components.py encoders [--rounds 5] [--json]
 Run pinned (taskset -c 0) on an otherwise idle machine; both default to one thread.
@@ -55,6 +56,7 @@ from selfplaydrive.maps.loader import load_map
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim.vec_env import VecEnv
 worlds, threads, steps, warmup = (int(a) for a in sys.argv[1:5])
+stage_name = sys.argv[5] if len(sys.argv) > 5 else "reward"
 env = VecEnv(load_map("default"), PaperSpawner(), worlds, seed=0, num_threads=threads)
 acts = np.random.default_rng(0).integers(0, [7, 13], size=(steps + warmup, env.num_agents, 2))
 env.reset(0)
@@ -77,9 +79,9 @@ for k in range(warmup):
 stage, obs_stage = [], []
 for k in range(warmup, warmup + steps):
     m = int(np.count_nonzero(env.masks))
-    r0, o0 = env.timings["reward"], env.timings["observation"]
+    r0, o0 = env.timings[stage_name], env.timings["observation"]
     env.step(acts[k])
-    stage.append((env.timings["reward"] - r0) / m * 1e9)
+    stage.append((env.timings[stage_name] - r0) / m * 1e9)
     obs_stage.append((env.timings["observation"] - o0) / m * 1e9)
 import selfplaydrive
 print(json.dumps({"agent_steps": n, "wall": wall, "cpu": cpu, "median_step_ns": float(np.median(per_step)),
@@ -99,6 +101,7 @@ def _child(tree: Path, args: argparse.Namespace) -> dict[str, float]:
         str(args.threads),
         str(args.steps),
         str(args.warmup),
+        args.stage,
     ]
     with tempfile.TemporaryDirectory() as tmp:  # no source tree in the working directory
         out = subprocess.run(cmd, cwd=tmp, env=env, capture_output=True, text=True, check=True).stdout
@@ -122,10 +125,12 @@ def overhead(args: argparse.Namespace) -> dict[str, object]:
             "agent_steps_per_cpu_s": statistics.median(x["agent_steps"] / x["cpu"] for x in rs),
             "agent_steps_per_s": statistics.median(x["agent_steps"] / x["wall"] for x in rs),
             "median_step_ns_per_agent": statistics.median(x["median_step_ns"] for x in rs),
+            # the stage chosen by --stage (the key keeps its name: reward is the default)
             "median_reward_stage_ns_per_agent": statistics.median(x["median_reward_stage_ns"] for x in rs),
             "median_observation_stage_ns_per_agent": statistics.median(
                 x["median_observation_stage_ns"] for x in rs
             ),
+            "stage": args.stage,
         }
     pairs = zip(runs["baseline"], runs["components"], strict=True)
     ratios = [(b["agent_steps"] / b["cpu"]) / (c["agent_steps"] / c["cpu"]) for b, c in pairs]
@@ -322,6 +327,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--steps", type=int, default=300, help="timed steps per run")
     p.add_argument("--warmup", type=int, default=30)
     p.add_argument("--rounds", type=int, default=6, help="alternations")
+    p.add_argument(
+        "--stage",
+        default="reward",
+        choices=("physics", "events", "reward", "observation", "finalize"),
+        help="stage timed alone in the overhead's profile run (physics: the physics components' cost)",
+    )
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if args.what == "overhead":

@@ -146,6 +146,13 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         parts["reward"] = lambda: _linear_reward(cfg.reward.terms)
     kwargs = {k: make() for k, make in parts.items() if k not in overrides}
     kwargs.update(overrides)
+    # --- physics components: a model with its own action space (physics/components.py, e.g.
+    # `physics=jerk`, `physics=delta`) brings it; env/actions configures the (accel, steer)
+    # actions of the models that read the env's
+    own = getattr(kwargs.get("physics"), "actions", None)
+    if own is not None and "actions" not in overrides:
+        kwargs["actions"] = own
+    # --- end physics components
     # objects are passed to the partial, not to instantiate: Hydra would turn a dataclass such
     # as RoadMap into a structured config
     return instantiate(cfg.env, _partial_=True)(**kwargs)
@@ -215,7 +222,11 @@ def build_model(cfg: Any, env: Any) -> Any:
     space = env.action_space
     nvec = [int(v) for v in np.asarray(getattr(space, "nvec", []))]
     if not nvec:
-        raise ConfigError(f"model: the models need MultiDiscrete actions (env/actions=discrete), got {space}")
+        raise ConfigError(
+            f"model: the models need MultiDiscrete actions (env/actions=discrete, a physics model with a "
+            f"value table), got {space}; continuous action spaces (physics=delta, env/actions=continuous) "
+            f"train with trainer=sb3"
+        )
     from dataclasses import asdict
 
     # the layout travels as a plain dict (max_objects, max_road, extra_dim): models accept either

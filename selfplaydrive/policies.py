@@ -237,6 +237,9 @@ def trained_env_kwargs(run_cfg: Any) -> dict[str, Any]:
         kwargs["terminated_vehicle"] = str(env.terminated_vehicle)
     if "physics" in run_cfg and "model" in run_cfg.physics:
         kwargs["physics"] = instantiate(run_cfg.physics.model)
+        own = getattr(kwargs["physics"], "actions", None)
+        if own is not None:  # a model with its own action space brings it (builder.build_env)
+            kwargs["actions"] = own
     return kwargs
 
 

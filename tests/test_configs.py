@@ -62,7 +62,9 @@ def test_every_group_has_options(group):
     [f"{g}={o}" for g in ENV_GROUPS for o in valid_options(g)],
 )
 def test_every_env_option_builds_and_steps(override):
-    cfg = compose("sim", [override, "env.num_worlds=1"])
+    # physics=custom names a model defined elsewhere (physics.model.target, mandatory)
+    extra = {"physics=custom": ["physics.model.target=selfplaydrive.physics:JerkBicycleModel"]}
+    cfg = compose("sim", [override, "env.num_worlds=1", *extra.get(override, [])])
     env = build_env(cfg)
     obs = env.reset(seed=1)
     assert np.all(np.isfinite(obs))
@@ -125,7 +127,11 @@ def test_unknown_option_lists_choices():
         ("train", "experiment=nope", "valid options for 'experiment': ablate_collision, ablate_friction"),
         ("eval", "eval=nope", "valid options for 'eval': diversity, paper, quick"),
         ("render", "drivr=random", "valid keys under '<root>': deterministic, driver, env"),
-        ("render", "physics=nope", "valid options for 'physics': bicycle, friction, pymunk"),
+        (
+            "render",
+            "physics=nope",
+            "valid options for 'physics': bicycle, custom, delta, friction, jerk, pymunk",
+        ),
         ("bench", "thread=[1]", "valid keys under '<root>':.*stages, steps, threads, warmup"),
         ("bench", "env/actions=nope", "valid options for 'env/actions': continuous, discrete"),
     ],

@@ -37,6 +37,9 @@ CONTEXTS = {
     ("physics", "friction"): [],
     ("physics", "bicycle"): [],
     ("physics", "pymunk"): [],
+    ("physics", "jerk"): [],
+    ("physics", "delta"): [],
+    ("physics", "custom"): ["physics.model.target=selfplaydrive.physics:JerkBicycleModel"],
     ("reward", "paper"): [],
     ("reward", "eval"): [],
     ("obs", "paper"): [],
@@ -144,6 +147,7 @@ SPECIAL = {
     "reward.center_low_prob": [0.0, 1.0],
     "reward.align_low_prob": [0.0, 1.0],
     "env.terminated_vehicle": ["remove", "obstacle"],
+    "physics.model.target": ["selfplaydrive.physics:BicycleModel"],
     "env.params.pedestrian_end": ["stand", "vanish"],
     "env.params.terminate_threshold": [0.05, 1.0],
 }

@@ -43,7 +43,10 @@ def test_render_errors_name_the_key(tmp_path, capsys):
     assert main(["render", "drivr=random", run]) == 1
     assert "valid keys under '<root>':" in capsys.readouterr().err
     assert main(["render", "physics=nope", run]) == 1
-    assert "valid options for 'physics': bicycle, friction, pymunk" in capsys.readouterr().err
+    assert (
+        "valid options for 'physics': bicycle, custom, delta, friction, jerk, pymunk"
+        in capsys.readouterr().err
+    )
     assert main(["render", "--driver", "random", run]) == 2  # the old argparse flags
     assert "unrecognized argument(s) --driver" in capsys.readouterr().err
 

@@ -11,7 +11,8 @@ cimport numpy as cnp
 from cython.parallel cimport prange
 from libc.stdint cimport int8_t, uint8_t, int32_t, int64_t, uint64_t, uintptr_t
 from selfplaydrive._sim.common cimport Sim, Params, Atlas, MAX_TERMS, reward_term_fn, encoder_fn
-from selfplaydrive._sim.physics cimport physics_world
+from selfplaydrive._sim.common cimport physics_fn
+from selfplaydrive._sim.physics cimport PhysSlot, physics_world
 from selfplaydrive._sim.events cimport lights_peds_world, peds_world, collisions_world
 from selfplaydrive._sim.road cimport road_world
 from selfplaydrive._sim.reward cimport TermSlot, reward_world, finalize_world
@@ -49,10 +50,10 @@ cdef void* ptr(dict arrays, str name, object dtype, list keep) except NULL:
     return cnp.PyArray_DATA(a)
 
 
-cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, const TermSlot* slots,
-                   const EncoderSlot* enc, int w) noexcept nogil:
+cdef void step_one(Sim* sim, const Atlas* atlas, const Params* prm, const PhysSlot* phys,
+                   const TermSlot* slots, const EncoderSlot* enc, int w) noexcept nogil:
     """The whole chain for world `w` (section 2): physics, events, reward, observation."""
-    physics_world(sim, prm, w)
+    physics_world(sim, prm, phys, w)
     lights_peds_world(sim, prm, w)
     collisions_world(sim, prm, w)
     road_world(sim, atlas, prm, w)
@@ -75,6 +76,9 @@ cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, const Encod
     for a in range(sim.A):
         i = w * sim.A + a
         sim.events[i] = 0  # events found while placing the scenario earn nothing
+    # physics components: a model's own per-agent state starts at 0 at spawn (abi.h)
+    for k in range(w * sim.A * sim.phys_dim, (w + 1) * sim.A * sim.phys_dim):
+        sim.phys_state[k] = 0.0
     encode_world(sim, atlas, prm, enc, w)
 
 
@@ -95,6 +99,9 @@ cdef class World:
             (0: none, a Python encoder fills the rows after the step) and its parameters as a
             C-contiguous NumPy array passed as `const void*` (or None). obs/encoders.py
             `KernelEncoder.plan` makes it. None: the paper's encoder.
+        physics: (address, args) of the physics model: the address of an `sd_physics_fn`
+            (selfplaydrive_abi.h) or 0 for a model stepped in Python before the step, and its
+            float32 parameters (or None). physics/components.py makes it.
     """
 
     cdef Sim sim
@@ -102,10 +109,12 @@ cdef class World:
     cdef Params prm
     cdef TermSlot slots[MAX_TERMS]
     cdef EncoderSlot enc
+    cdef PhysSlot phys
     cdef list keep
     cdef public dict timings
 
-    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms, encoder=None):
+    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms, tuple physics,
+                 encoder=None):
         self.keep = []
         self.timings = {name: 0.0 for name in STAGES + ("reset",)}
         self._bind_dims(dims)
@@ -114,6 +123,7 @@ cdef class World:
         self._bind_atlas(atlas)
         self._bind_params(params)
         self._bind_terms(terms, state)
+        self._bind_physics(physics, state)
         self._bind_encoder(encoder)
 
     def _bind_encoder(self, encoder):
@@ -131,6 +141,20 @@ cdef class World:
                 raise TypeError(f"encoder args: expected a non-empty C-contiguous array, got {args!r}")
             self.keep.append(args)
             self.enc.args = <const void*>cnp.PyArray_DATA(args)
+
+    def _bind_physics(self, tuple physics, dict s):
+        """The physics model's slot: its function (NULL: stepped in Python) and parameters."""
+        cdef uintptr_t address
+        address, args = physics
+        N = self.sim.W * self.sim.A
+        for name, shape in (("act_i", (N, self.sim.act_dim)), ("act_f", (N, self.sim.act_dim)),
+                            ("phys_state", (N, self.sim.phys_dim))):
+            if s[name].shape != shape:
+                raise ValueError(f"buffer {name}: expected shape {shape}, got {s[name].shape}")
+        self.phys.fn = <physics_fn>address
+        self.phys.args = NULL
+        if args is not None:
+            self.phys.args = <const float*>ptr({"args": args}, "args", np.float32, self.keep)
 
     def _bind_terms(self, list terms, dict s):
         """Fill the component table of the reward stage (one slot per column)."""
@@ -157,6 +181,7 @@ cdef class World:
         self.sim.max_obj = d["max_obj"]; self.sim.max_road = d["max_road"]
         self.sim.cand_cap = d["cand_cap"]; self.sim.obs_dim = d["obs_dim"]
         self.sim.num_terms = d["num_terms"]
+        self.sim.act_dim = d["act_dim"]; self.sim.phys_dim = d["phys_dim"]
 
     def _bind_agents(self, dict s):
         cdef list k = self.keep
@@ -210,6 +235,7 @@ cdef class World:
         self.sim.term_sum = <double*>ptr(s, "term_sum", f8, k); self.sim.ev_count = <int64_t*>ptr(s, "ev_count", i8, k)
         self.sim.dist = <double*>ptr(s, "dist", f8, k)
         self.sim.cand = <int32_t*>ptr(s, "cand", i4, k); self.sim.cand_d = <float*>ptr(s, "cand_d", f4, k)
+        self.sim.phys_state = <float*>ptr(s, "phys_state", f4, k)
 
     def _bind_atlas(self, dict a):
         cdef list k = self.keep
@@ -271,14 +297,14 @@ cdef class World:
             # neighbouring worlds (whose per-slot bytes share cache lines) mostly stay on one
             # thread. Results do not depend on which thread steps a world.
             for w in prange(W, num_threads=num_threads, schedule="dynamic", chunksize=chunk):
-                step_one(&self.sim, &self.atlas, &self.prm, self.slots, &self.enc, w)
+                step_one(&self.sim, &self.atlas, &self.prm, &self.phys, self.slots, &self.enc, w)
 
     def _step_profiled(self, int num_threads):
         cdef int w, W = self.sim.W
         t0 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
-                physics_world(&self.sim, &self.prm, w)
+                physics_world(&self.sim, &self.prm, &self.phys, w)
         t1 = time.perf_counter()
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
@@ -308,6 +334,13 @@ cdef class World:
         with nogil:
             for w in prange(W, num_threads=num_threads, schedule="static"):
                 encode_world(&self.sim, &self.atlas, &self.prm, &self.enc, w)
+
+    def physics_stage(self, int num_threads=1):
+        """Run only the physics stage of every world (selfplaydrive.testing.check_physics)."""
+        cdef int w, W = self.sim.W
+        with nogil:
+            for w in prange(W, num_threads=num_threads, schedule="static"):
+                physics_world(&self.sim, &self.prm, &self.phys, w)
 
     def after_reset(self, cnp.ndarray worlds, int num_threads=1):
         """Finish the reset of the listed worlds (int32 indices) after their scenario was packed."""

@@ -122,6 +122,16 @@ class RuleBasedDriver:
         self.lanes = LaneTable.build(env.maps)
         self.wheelbase_ratio = float(getattr(env.physics, "wheelbase_ratio", 0.6))
         self.table = env.action_table
+        names = tuple(getattr(self.table, "names", ("accel", "steer")))
+        if names != ("accel", "steer"):
+            # a physics model with its own action space (physics=jerk, physics=delta): the
+            # driver's controls are accelerations and steering angles, not changes or motions
+            from selfplaydrive.errors import ConfigError
+
+            raise ConfigError(
+                f"rule-based driver: drives (accel, steer) actions; physics "
+                f"{getattr(env.physics, 'name', type(env.physics).__name__)!r} reads {names}"
+            )
         N = env.num_agents
         self.route = np.full((N, self.p.route_hops), -1, dtype=np.int64)
         self._prev_step = np.full(env.num_worlds, -1, dtype=np.int64)

@@ -13,8 +13,10 @@ def static_actions(table, n: int) -> np.ndarray:
         a[:, 0] = int(np.argmin(table.accel))
         a[:, 1] = int(np.argmin(np.abs(table.steer)))
         return a
-    a = np.zeros((n, 2), dtype=np.float32)
-    a[:, 0] = -table.high[0]
+    # a box: zero where the bounds allow it, the lowest value of column 0 (full braking for the
+    # (accel, steer) box; no forward motion for the delta model's (dx, dy, dyaw))
+    a = np.tile(np.clip(0.0, table.low, table.high).astype(np.float32), (n, 1))
+    a[:, 0] = table.low[0]
     return a
 
 

@@ -108,8 +108,12 @@ def check_action(space: gym.Space, action: object, name: str) -> np.ndarray:
         ValueError: Wrong shape or dtype, a non-finite value or a value outside the space.
     """
     a = np.asarray(action)
-    if a.shape != (2,):
-        raise ValueError(f"{name}: expected shape (2,), got shape {a.shape} ({action!r})")
+    # (2,) for the bicycle models; a physics model may declare other action columns (physics=delta: 3)
+    dim = (
+        len(space.nvec) if isinstance(space, gym.spaces.MultiDiscrete) else int(np.prod(space.shape or (2,)))
+    )
+    if a.shape != (dim,):
+        raise ValueError(f"{name}: expected shape ({dim},), got shape {a.shape} ({action!r})")
     if isinstance(space, gym.spaces.MultiDiscrete):
         return _check_indices(a, np.asarray(space.nvec), name)
     if isinstance(space, gym.spaces.Box):

@@ -121,11 +121,12 @@ class SingleAgentEnv(gym.Env):
         if callable(self.others):
             rows = np.arange(env.num_agents) != self.ego
             out = np.asarray(self.others(observe(env)[rows]))
-            if out.shape != (env.num_agents - 1, 2):
+            d = int(table.dim)  # 2, or the physics model's own action columns
+            if out.shape != (env.num_agents - 1, d):
                 raise ValueError(
-                    f"others policy: expected actions of shape ({env.num_agents - 1}, 2), got {out.shape}"
+                    f"others policy: expected actions of shape ({env.num_agents - 1}, {d}), got {out.shape}"
                 )
-            acts = np.zeros((env.num_agents, 2), dtype=out.dtype)
+            acts = np.zeros((env.num_agents, d), dtype=out.dtype)
             acts[rows] = out
             return acts
         return static_actions(table, env.num_agents)

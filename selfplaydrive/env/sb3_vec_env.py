@@ -64,9 +64,10 @@ class SB3VecEnv(SB3BaseVecEnv):
         """
         check_open(self.closed, "SB3VecEnv.step_async")
         a = np.asarray(actions)
-        if a.size != self.num_envs * 2:
-            raise ValueError(f"actions: expected shape ({self.num_envs}, 2), got shape {a.shape}")
-        self._actions = a.reshape(self.num_envs, 2)
+        d = int(self.env.action_table.dim)  # 2, or the physics model's own action columns
+        if a.size != self.num_envs * d:
+            raise ValueError(f"actions: expected shape ({self.num_envs}, {d}), got shape {a.shape}")
+        self._actions = a.reshape(self.num_envs, d)
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         """Step every world (see the module docstring for the per-slot values)."""

@@ -88,8 +88,9 @@ enum {
     SD_NUM_STATS = 8
 };
 
-/* Physics kernels (section 2.6). */
-enum { SD_PHYS_BICYCLE = 0, SD_PHYS_FRICTION = 1, SD_PHYS_EXTERNAL = 2 };
+/* Physics models (section 2.6): the value of `sd_params.physics`, for listings only (the step
+ * calls the selected model through its `sd_physics_fn`; no kernel branches on this). */
+enum { SD_PHYS_BICYCLE = 0, SD_PHYS_FRICTION = 1, SD_PHYS_EXTERNAL = 2, SD_PHYS_COMPONENT = 3 };
 
 /* Observation block sizes (obs/layout): features of the ego, per object, per road segment. */
 enum { SD_EGO_DIM = 19, SD_OBJ_DIM = 9, SD_ROAD_DIM = 8 };
@@ -128,8 +129,9 @@ typedef struct sd_params {
     float gravity;                /* [m/s^2] g of the friction limit (9.81) */
     float max_speed;              /* [m/s] speed clamp (also the observation scale of speeds) */
     int discrete;                 /* 1: actions are table indices, 0: continuous values */
-    const float* accel_table;     /* (n_accel,) [m/s^2] discrete acceleration values */
-    const float* steer_table;     /* (n_steer,) [rad] discrete steering angles */
+    const float* accel_table;     /* (n_accel,) [m/s^2] discrete acceleration values (action */
+                                  /* column 0's values; a model may give them another meaning) */
+    const float* steer_table;     /* (n_steer,) [rad] discrete steering angles (column 1's values) */
     float comfort_limit;          /* [m/s^2] comfort threshold on |a_long| and |a_lat| (3) */
     float obs_radius;             /* [m] objects and road segments are observed within this (100) */
     float lane_radius;            /* [m] lane association searches centerlines within this */
@@ -207,8 +209,8 @@ typedef struct sd_sim {
                                   /* gather (obs_radius when fewer lie within it); < 0: no gather yet */
     float* road_x;                /* (N,) [m] position of that gather (the bound holds wherever the */
     float* road_y;                /* agent moved since, teleports included) */
-    int32_t* act_i;               /* (N, 2) discrete action indices (accel, steer) */
-    float* act_f;                 /* (N, 2) continuous actions [m/s^2], [rad] */
+    int32_t* act_i;               /* (N, act_dim) discrete action indices (accel, steer) */
+    float* act_f;                 /* (N, act_dim) continuous actions [m/s^2], [rad] */
     float* reward;                /* (N,) summed reward of the last step */
     float* terms;                 /* (N, num_terms) per-term reward of the last step */
     uint8_t* term;                /* (N,) terminated in the last step */
@@ -256,6 +258,11 @@ typedef struct sd_sim {
     double* dist;                 /* [m] distance driven by all agents of the episode */
     int32_t* cand;                /* (W, cand_cap) scratch: candidate indices */
     float* cand_d;                /* (W, cand_cap) scratch: candidate squared distances [m^2] */
+                                  /* --- physics-model components (appended, ABI 1; sd_physics_fn) --- */
+    int act_dim;                  /* D, columns of act_i and act_f: the model's action dimensions */
+                                  /* (2 for the bicycle models' (accel, steer)) */
+    int phys_dim;                 /* floats of model-owned state per agent slot (0: none) */
+    float* phys_state;            /* (N, phys_dim) state the physics model owns; 0 at spawn */
 } sd_sim;
 /* A reward-term component (section 2.3): computes one term for every active agent slot of
  * world `w` and writes it to out[a * stride] for slot a in [0, sim->A). It reads the state
@@ -288,5 +295,22 @@ typedef void (*sd_reward_term_fn)(const sd_sim* sim, const sd_params* prm, const
  * different worlds: no global state, no allocation, no Python. */
 typedef void (*sd_encoder_fn)(const sd_sim* sim, const sd_params* prm, const sd_atlas* atlas,
                               const void* args, int32_t w, float* obs, int32_t stride);
+
+/* ---- physics-model components (section 2.6; docs/components.md "Write a physics model") ----
+ * A physics model advances every active agent slot of world `w` by one step prm->dt from its
+ * action: act_i[i * act_dim + k] (discrete, prm->discrete == 1: indices into the model's value
+ * tables prm->accel_table / prm->steer_table) or act_f[i * act_dim + k] (continuous), i = w * A + a.
+ * Before the call the step has copied x, y, heading into px, py, pheading and zeroed a_long,
+ * a_lat of every slot of the world (a slot the model leaves alone stands still). The model writes
+ * only x, y, heading (wrapped to (-pi, pi]), hcos, hsin (cos / sin of the new heading), speed
+ * (>= 0, <= prm->max_speed), a_long, a_lat of active slots (px, py, pheading when it moves a car
+ * along another path than the straight sweep), and its own per-agent state: `state` points at
+ * the world's rows of `sim->phys_state`, (A, phys_dim) floats, zeroed when the world is reset
+ * (NULL when the model declares none). After the call the step adds speed * dt of every active
+ * slot to the world's distance. `args` holds the model's own parameters (float32, NULL when
+ * none). Called once per world inside the parallel step, without the GIL, possibly from several
+ * threads at once for different worlds: no global state, no allocation, no Python. */
+typedef void (*sd_physics_fn)(sd_sim* sim, const sd_params* prm, const float* args, int32_t w,
+                              float* state);
 
 #endif /* SELFPLAYDRIVE_ABI_H */

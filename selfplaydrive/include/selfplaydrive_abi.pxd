@@ -64,6 +64,7 @@ cdef extern from "selfplaydrive_abi.h" nogil:
         PHYS_BICYCLE "SD_PHYS_BICYCLE"
         PHYS_FRICTION "SD_PHYS_FRICTION"
         PHYS_EXTERNAL "SD_PHYS_EXTERNAL"
+        PHYS_COMPONENT "SD_PHYS_COMPONENT"
         EGO_DIM "SD_EGO_DIM"
         OBJ_DIM "SD_OBJ_DIM"
         ROAD_DIM "SD_ROAD_DIM"
@@ -210,6 +211,9 @@ cdef extern from "selfplaydrive_abi.h" nogil:
         double* dist
         int32_t* cand
         float* cand_d
+        int act_dim
+        int phys_dim
+        float* phys_state
 
     ctypedef void (*reward_term_fn "sd_reward_term_fn")(const Sim* sim, const Params* prm, const Atlas* atlas,
                                                       const float* args, int32_t w, float* out,
@@ -219,3 +223,6 @@ cdef extern from "selfplaydrive_abi.h" nogil:
     ctypedef void (*encoder_fn "sd_encoder_fn")(const Sim* sim, const Params* prm, const Atlas* atlas,
                                                const void* args, int32_t w, float* obs,
                                                int32_t stride) noexcept nogil
+    # physics-model components (appended, ABI 1): one world per call (selfplaydrive_abi.h)
+    ctypedef void (*physics_fn "sd_physics_fn")(Sim* sim, const Params* prm, const float* args, int32_t w,
+                                                float* state) noexcept nogil

@@ -54,8 +54,9 @@ class PymunkModel(BicycleModel):
     parameter (a key that changes nothing would be a silently ignored setting).
     """
 
+    name = "pymunk"
     kernel = PHYS_EXTERNAL
-    external = True
+    external = True  # the Python/NumPy form of a physics component: no kernel address
 
     def __init__(
         self,
@@ -74,6 +75,9 @@ class PymunkModel(BicycleModel):
         self.mass = VEHICLE_MASS
         self._space = pymunk.Space()
         self._bodies: list = []
+
+    def address(self) -> int:
+        return 0  # stepped in Python before the kernels (`step`)
 
     def _body(self, k: int):
         pm = self._pymunk

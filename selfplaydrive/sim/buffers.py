@@ -34,6 +34,10 @@ class Dims:
     cand_cap: int
     obs_dim: int
     num_terms: int = NUM_TERMS  # columns of `terms` / `term_sum`: the env's selected reward terms
+    # physics-model components (physics/components.py): columns of act_i / act_f (the model's
+    # action dimensions) and floats of model-owned state per agent slot (`phys_state`)
+    act_dim: int = 2
+    phys_dim: int = 0
 
     @staticmethod
     def of(sc: Scenario, W: int, G: int, max_obj: int, max_road: int, cand_cap: int, obs_dim: int) -> Dims:
@@ -95,8 +99,9 @@ def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
         hidden=((N, len(HIDDEN_PARAMS)), f4),
         waypoints=((N, d.K, 2), f4),
         road_idx=((N, d.max_road), i4),
-        act_i=((N, 2), i4),
-        act_f=((N, 2), f4),
+        act_i=((N, d.act_dim), i4),
+        act_f=((N, d.act_dim), f4),
+        phys_state=((N, d.phys_dim), f4),
         terms=((N, d.num_terms), f4),
         obs=((N, d.obs_dim), f4),
         final_obs=((N, d.obs_dim), f4),

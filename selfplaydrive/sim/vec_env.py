@@ -36,10 +36,11 @@ from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
 from selfplaydrive.obs.encoders import Encoder, KernelEncoder, as_encoder
 from selfplaydrive.obs.layout import ObsLayout
-from selfplaydrive.physics.models import BicycleModel, FrictionBicycleModel
+from selfplaydrive.physics.components import PhysicsModel
+from selfplaydrive.physics.models import FrictionBicycleModel
 from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
-from selfplaydrive.sim.actions import ContinuousActions, DiscreteActions
+from selfplaydrive.sim.actions import BoxActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
 from selfplaydrive.sim.params import SimParams
@@ -61,9 +62,13 @@ class VecEnv:
         maps: One `RoadMap` or a sequence; worlds draw a map uniformly from their own generator.
         spawner: Object with `sample(road_map, rng, map_index=0) -> Scenario`.
         num_worlds: Worlds stepped together.
-        physics: A physics model (default `FrictionBicycleModel()`, section 2.6); `PymunkModel()`
-            steps rigid bodies in Python before the kernels (ablations, slow).
-        actions: `DiscreteActions()` (default, section 2.4) or `ContinuousActions()`.
+        physics: A physics model (default `FrictionBicycleModel()`, section 2.6): a component
+            called inside the step (physics/components.py: the library's models, a numba
+            cfunc or Cython function as `KernelPhysics`), or one stepped in Python before the
+            kernels (`PymunkModel()`, ablations, slow).
+        actions: `DiscreteActions()` (default, section 2.4), `ContinuousActions()`, or another
+            table or box the physics model reads; default: the model's own action space (e.g.
+            `JerkBicycleModel`'s table of changes), else the paper's discrete tables.
         params: `SimParams` (default: the paper's constants).
         obs: The observation encoder (section 2.5; obs/encoders.py): `PaperEncoder` (the
             default: 63 objects, 200 road segments within 100 m), an `ObsConfig` (the paper
@@ -92,8 +97,8 @@ class VecEnv:
         maps: RoadMap | Sequence[RoadMap],
         spawner: object,
         num_worlds: int,
-        physics: BicycleModel | None = None,
-        actions: DiscreteActions | ContinuousActions | None = None,
+        physics: PhysicsModel | None = None,
+        actions: DiscreteActions | BoxActions | None = None,
         params: SimParams | None = None,
         obs: ObsConfig | Encoder | None = None,
         seed: int | None = 0,
@@ -120,10 +125,17 @@ class VecEnv:
             )
         self.spawner = spawner
         self.num_worlds = int(num_worlds)
-        # a kernel model or one stepped in Python (`external`, physics/pymunk_model.py)
+        # --- physics component (physics/components.py): a kernel model called through its
+        # function pointer inside the step, or one stepped in Python (`external`)
         self.physics: Any = physics if physics is not None else FrictionBicycleModel()
+        if not (hasattr(self.physics, "physics_slot") and hasattr(self.physics, "kernel_params")):
+            raise ValueError(
+                f"physics: expected a physics model (selfplaydrive.physics.PhysicsModel: physics_slot(), "
+                f"kernel_params()), got {self.physics!r}"
+            )
         self._external_physics = bool(getattr(self.physics, "external", False))
-        self.action_table = actions if actions is not None else DiscreteActions()
+        self.action_table = self.physics.resolve_actions(actions)
+        # --- end physics component
         self.params = params if params is not None else SimParams()
         # ---- observation encoder (issue #13) ----
         self.encoder = as_encoder(obs)
@@ -167,6 +179,9 @@ class VecEnv:
             self.layout.obs_dim,
         )
         self.dims = dataclasses.replace(self.dims, num_terms=len(self.reward.columns))
+        self.dims = dataclasses.replace(
+            self.dims, act_dim=int(self.action_table.dim), phys_dim=int(self.physics.state_dim)
+        )
         _check_memory(self.dims)
         self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]
         self.buffers = allocate(self.dims)
@@ -177,6 +192,7 @@ class VecEnv:
             self.atlas,
             self._kernel_params(),
             self.reward.plan(),
+            self.physics.physics_slot(),
             self.encoder.plan() if isinstance(self.encoder, KernelEncoder) else (0, None),
         )
         self._expose()
@@ -194,6 +210,10 @@ class VecEnv:
         k["accel_table"] = np.ascontiguousarray(self.action_table.accel, dtype=np.float32)
         k["steer_table"] = np.ascontiguousarray(self.action_table.steer, dtype=np.float32)
         k["obstacle_mode"] = int(self.terminated_vehicle == "obstacle")
+        # the physics model's own parameters (World takes them with its address; listed here so
+        # that everything the kernels read is in one place, tests/test_parity_effect.py)
+        args = self.physics.physics_slot()[1]
+        k["physics_args"] = args if args is not None else np.zeros(0, dtype=np.float32)
         return k
 
     def _expose(self) -> None:
@@ -268,7 +288,8 @@ class VecEnv:
         return self.observations
 
     def step(self, actions: np.ndarray) -> None:
-        """Apply `actions` ((N, 2): int indices for discrete, float32 for continuous) to every
+        """Apply `actions` ((N, D): int indices for discrete, float32 for continuous; D = 2 unless
+        the physics model declares other action columns, `action_table.dim`) to every
         agent, step all worlds, autoreset ended worlds. Results are in the env's buffers.
 
         Raises:
