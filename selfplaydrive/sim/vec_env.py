@@ -128,10 +128,12 @@ class VecEnv:
         # --- physics component (physics/components.py): a kernel model called through its
         # function pointer inside the step, or one stepped in Python (`external`)
         self.physics: Any = physics if physics is not None else FrictionBicycleModel()
-        if not (hasattr(self.physics, "physics_slot") and hasattr(self.physics, "kernel_params")):
+        needed = ("physics_slot", "kernel_params", "resolve_actions", "state_dim", "max_speed")
+        missing = [n for n in needed if not hasattr(self.physics, n)]
+        if missing:
             raise ValueError(
-                f"physics: expected a physics model (selfplaydrive.physics.PhysicsModel: physics_slot(), "
-                f"kernel_params()), got {self.physics!r}"
+                f"physics: expected a physics model (a selfplaydrive.physics.PhysicsModel), got "
+                f"{self.physics!r}, which lacks {missing}"
             )
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = self.physics.resolve_actions(actions)

@@ -392,3 +392,9 @@ def test_new_models_same_seed_same_rollout_at_1_and_2_threads(model):
         rollout_digest(make_env("default", num_worlds=4, physics=model, num_threads=t), 120) for t in (1, 2)
     }
     assert len(digests) == 1
+
+
+def test_env_refuses_an_object_that_is_no_physics_model(straight_map):
+    spawner = FixedSpawner(make_scenario([dict(xy=(0.0, 0.0), speed=5.0)]))
+    with pytest.raises(ValueError, match=r"physics: expected a physics model .* lacks \['physics_slot'"):
+        VecEnv(straight_map, spawner, 1, physics=object())
