@@ -47,6 +47,9 @@ EXCEPTIONS = {
     # the observation-encoder work moves it to obs/layout.py (issue #13)
     ("models", "sim.layout"),
     ("obs", "sim.layout"),
+    # a physics model declares its action space (issue #13); the action-table types it builds
+    # (DiscreteActions, BoxActions) still live in sim/actions.py, next to the env's checks
+    ("physics", "sim.actions"),
 }
 
 

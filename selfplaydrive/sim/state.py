@@ -93,6 +93,7 @@ def set_state(env: VecEnv, state: Mapping[str, Any]) -> None:
         )
     # np.load gives 0-d arrays for the scalars of a state saved with np.savez
     state = {k: v.item() if isinstance(v, np.ndarray) and v.ndim == 0 else v for k, v in state.items()}
+    state = _fill_empty_fields(state, _spec(env))
     pending = _validate(env, state)
     for name, live in env.buffers.items():
         np.copyto(live, state[f"buffers.{name}"])  # in place: the Cython World points at these
@@ -308,3 +309,18 @@ def _pending(env: VecEnv, state: Mapping[str, Any], keys: set[str]) -> Scenario 
     except ValueError as exc:
         raise ValueError(f"state fields pending.*: {exc}") from exc
     return sc
+
+
+def _fill_empty_fields(state: Mapping[str, Any], spec: Mapping[str, Any]) -> Mapping[str, Any]:
+    """States saved before a buffer existed lack it; a buffer that holds nothing in this env
+    (e.g. `buffers.phys_state` of a model without its own state: (N, 0)) is filled in empty, so
+    those states and the checkpoints holding them still restore."""
+    out = None
+    for key, expected in spec.items():
+        if key in state or not isinstance(expected, tuple):
+            continue
+        shape, dtype = expected
+        if key.startswith("buffers.") and None not in shape and 0 in shape:
+            out = dict(state) if out is None else out
+            out[key] = np.zeros(shape, dtype=dtype)
+    return state if out is None else out

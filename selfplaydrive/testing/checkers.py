@@ -22,6 +22,7 @@ import numpy as np
 
 from selfplaydrive.rewards.base import RewardHook
 from selfplaydrive.scenario.base import Spawner
+from selfplaydrive.sim.actions import BoxActions
 
 if TYPE_CHECKING:
     from selfplaydrive.maps.roadmap import RoadMap
@@ -351,6 +352,9 @@ def _actions(env: VecEnv, steps: int, seed: int) -> Iterator[np.ndarray]:
             yield np.stack(
                 [rng.integers(n_acc // 2, n_acc, env.num_agents), rng.integers(0, n_steer, env.num_agents)], 1
             )
+        elif isinstance(t, BoxActions) and len(t.low) != 2:
+            # a model's own box (e.g. the delta model's dx, dy, dyaw): uniform within its bounds
+            yield rng.uniform(t.low, t.high, (env.num_agents, len(t.low))).astype(np.float32)
         else:
             yield np.stack(
                 [rng.uniform(-1.0, 2.0, env.num_agents), rng.uniform(-0.3, 0.3, env.num_agents)], 1
