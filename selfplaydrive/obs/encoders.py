@@ -25,6 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from selfplaydrive._abi_load import capsule_address, capsule_name, cython_capsule, numba_address
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.obs.config import ObsConfig
 from selfplaydrive.obs.layout import ObsLayout
@@ -103,19 +104,10 @@ class KernelEncoder:
         """
         from selfplaydrive.rewards import numba_abi  # needs the numba extra
 
-        sig = getattr(cfunc, "_sig", None)
-        if sig is None or not hasattr(cfunc, "address"):
-            raise ConfigError(
-                f"encoder {name!r}: expected a numba cfunc (@numba.cfunc(numba_abi.ENCODER_SIGNATURE)), "
-                f"got {type(cfunc).__name__}"
-            )
-        if sig != numba_abi.ENCODER_SIGNATURE:
-            raise ConfigError(
-                f"encoder {name!r}: the cfunc's signature is {sig}, expected {numba_abi.ENCODER_SIGNATURE} "
-                f"(numba_abi.ENCODER_SIGNATURE, the C signature {SIGNATURE})"
-            )
+        hint = "numba_abi.ENCODER_SIGNATURE"
+        address = numba_address(f"encoder {name!r}", cfunc, numba_abi.ENCODER_SIGNATURE, hint, SIGNATURE)
         kw.setdefault("doc", (cfunc.__doc__ or "").strip())
-        return cls(name, int(cfunc.address), layout, radius, args, form="numba", owner=cfunc, **kw)
+        return cls(name, address, layout, radius, args, form="numba", owner=cfunc, **kw)
 
     @classmethod
     def from_cython(
@@ -134,23 +126,10 @@ class KernelEncoder:
         Raises:
             ConfigError: The module does not export `function`, or its signature differs.
         """
-        from selfplaydrive.rewards.components import _capsule_name, _capsule_pointer, _normalise
-
-        capi = getattr(module, "__pyx_capi__", None) or {}
-        if function not in capi:
-            raise ConfigError(
-                f"encoder {name!r}: module {module.__name__!r} exports no cdef function {function!r} "
-                f"(declare it in the module's .pxd); exported: {sorted(capi)}"
-            )
-        got = _capsule_name(capi[function]) or ""
-        want = _builtin_capsule_signature()
-        if _normalise(got) != _normalise(want):
-            raise ConfigError(
-                f"encoder {name!r}: the function's signature is {got!r}, expected {want!r} "
-                f"(sd_encoder_fn: {SIGNATURE})"
-            )
+        what = f"encoder {name!r}"
+        capsule = cython_capsule(what, module, function)
+        address = capsule_address(what, capsule, _builtin_capsule_signature(), f"sd_encoder_fn: {SIGNATURE}")
         kw.setdefault("doc", f"{module.__name__}.{function}")
-        address = _capsule_pointer(capi[function], got)
         return cls(name, address, layout, radius, args, form="cython", owner=module, **kw)
 
 
@@ -394,8 +373,7 @@ def _builtin_capsule_signature() -> str:
     """The signature string Cython gives a function of the encoder type (the library's own
     paper encoder, compiled against the same declarations a user's module cimports)."""
     from selfplaydrive._sim import observe
-    from selfplaydrive.rewards.components import _capsule_name
 
-    name = _capsule_name(observe.__pyx_capi__["encode_paper"])  # type: ignore[attr-defined]
+    name = capsule_name(observe.__pyx_capi__["encode_paper"])  # type: ignore[attr-defined]
     assert name is not None
     return name

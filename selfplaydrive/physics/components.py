@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from selfplaydrive._abi_load import capsule_address, capsule_name, cython_capsule, numba_address
 from selfplaydrive.errors import ConfigError
 
 if TYPE_CHECKING:  # sim/ imports this package (sim/vec_env.py): the action classes at use
@@ -237,20 +238,10 @@ class KernelPhysics(PhysicsModel):
         """
         from selfplaydrive.physics import numba_abi  # needs the numba extra
 
-        sig = getattr(cfunc, "_sig", None)
-        if sig is None or not hasattr(cfunc, "address"):
-            raise ConfigError(
-                f"physics model {name!r}: expected a numba cfunc "
-                f"(@numba.cfunc(physics.numba_abi.SIGNATURE)), "
-                f"got {type(cfunc).__name__}"
-            )
-        if sig != numba_abi.SIGNATURE:
-            raise ConfigError(
-                f"physics model {name!r}: the cfunc's signature is {sig}, expected {numba_abi.SIGNATURE} "
-                f"(physics.numba_abi.SIGNATURE, the C signature {SIGNATURE})"
-            )
+        what, hint = f"physics model {name!r}", "physics.numba_abi.SIGNATURE"
+        address = numba_address(what, cfunc, numba_abi.SIGNATURE, hint, SIGNATURE)
         kwargs.setdefault("doc", (cfunc.__doc__ or "").strip().split("\n")[0])
-        return cls(name, int(cfunc.address), form="numba", owner=cfunc, **kwargs)
+        return cls(name, address, form="numba", owner=cfunc, **kwargs)
 
     @classmethod
     def from_cython(cls, name: str, module: ModuleType, function: str, **kwargs: Any) -> KernelPhysics:
@@ -260,15 +251,10 @@ class KernelPhysics(PhysicsModel):
         Raises:
             ConfigError: The module does not export `function`, or its signature differs.
         """
-        capi = getattr(module, "__pyx_capi__", None) or {}
-        if function not in capi:
-            raise ConfigError(
-                f"physics model {name!r}: module {module.__name__!r} exports no cdef function {function!r} "
-                f"(declare it in the module's .pxd); exported: {sorted(capi)}"
-            )
+        capsule = cython_capsule(f"physics model {name!r}", module, function)
         kwargs.setdefault("doc", f"{module.__name__}.{function}")
         kwargs.setdefault("owner", module)
-        return cls.from_capsule(name, capi[function], **kwargs)
+        return cls.from_capsule(name, capsule, **kwargs)
 
     @classmethod
     def from_capsule(cls, name: str, capsule: Any, **kwargs: Any) -> KernelPhysics:
@@ -277,29 +263,19 @@ class KernelPhysics(PhysicsModel):
         Raises:
             ConfigError: Not a capsule, or a capsule of another signature.
         """
-        from selfplaydrive.rewards.components import _capsule_name, _capsule_pointer, _normalise
-
-        got = _capsule_name(capsule)
-        if got is None:
-            raise ConfigError(f"physics model {name!r}: expected a PyCapsule, got {type(capsule).__name__}")
-        want = builtin_capsule_signature()
-        if _normalise(got) != _normalise(want):
-            raise ConfigError(
-                f"physics model {name!r}: the function's signature is {got!r}, expected {want!r} "
-                f"(sd_physics_fn: {SIGNATURE})"
-            )
+        what, c_name = f"physics model {name!r}", f"sd_physics_fn: {SIGNATURE}"
+        address = capsule_address(what, capsule, builtin_capsule_signature(), c_name)
         kwargs.setdefault("form", "cython")
         kwargs.setdefault("owner", capsule)
-        return cls(name, _capsule_pointer(capsule, got), **kwargs)
+        return cls(name, address, **kwargs)
 
 
 def builtin_capsule_signature() -> str:
     """The signature string Cython gives a function of type `sd_physics_fn` (the library's own
     bicycle, compiled against the declarations a user's module cimports)."""
     from selfplaydrive._sim import physics as kernels
-    from selfplaydrive.rewards.components import _capsule_name
 
-    name = _capsule_name(kernels.__pyx_capi__["phys_bicycle"])
+    name = capsule_name(kernels.__pyx_capi__["phys_bicycle"])
     assert name is not None
     return name
 

@@ -17,7 +17,6 @@ weighted columns, and each column has its own episode sum (`pop_episode_stats()[
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import math
 from collections.abc import Mapping, Sequence
@@ -27,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive._abi_load import capsule_address, capsule_name, cython_capsule, numba_address
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.rewards.registry import TERM_NAMES, TERMS, RewardHook
 
@@ -91,20 +91,9 @@ class KernelTerm:
         """
         from selfplaydrive.rewards import numba_abi  # needs the numba extra
 
-        sig = getattr(cfunc, "_sig", None)
-        if sig is None or not hasattr(cfunc, "address"):
-            raise ConfigError(
-                f"reward term {name!r}: expected a numba cfunc (@numba.cfunc(numba_abi.SIGNATURE)), "
-                f"got {type(cfunc).__name__}"
-            )
-        if sig != numba_abi.SIGNATURE:
-            raise ConfigError(
-                f"reward term {name!r}: the cfunc's signature is {sig}, expected {numba_abi.SIGNATURE} "
-                f"(numba_abi.SIGNATURE, the C signature {SIGNATURE})"
-            )
-        return cls(
-            name, int(cfunc.address), tuple(args), "numba", doc or (cfunc.__doc__ or "").strip(), cfunc
-        )
+        what = f"reward term {name!r}"
+        address = numba_address(what, cfunc, numba_abi.SIGNATURE, "numba_abi.SIGNATURE", SIGNATURE)
+        return cls(name, address, tuple(args), "numba", doc or (cfunc.__doc__ or "").strip(), cfunc)
 
     @classmethod
     def from_cython(
@@ -116,13 +105,8 @@ class KernelTerm:
         Raises:
             ConfigError: The module does not export `function`, or its signature differs.
         """
-        capi = getattr(module, "__pyx_capi__", None) or {}
-        if function not in capi:
-            raise ConfigError(
-                f"reward term {name!r}: module {module.__name__!r} exports no cdef function {function!r} "
-                f"(declare it in the module's .pxd); exported: {sorted(capi)}"
-            )
-        return cls.from_capsule(name, capi[function], args, doc or f"{module.__name__}.{function}", module)
+        capsule = cython_capsule(f"reward term {name!r}", module, function)
+        return cls.from_capsule(name, capsule, args, doc or f"{module.__name__}.{function}", module)
 
     @classmethod
     def from_capsule(
@@ -134,16 +118,8 @@ class KernelTerm:
         Raises:
             ConfigError: Not a capsule, or a capsule of another signature.
         """
-        got = _capsule_name(capsule)
-        if got is None:
-            raise ConfigError(f"reward term {name!r}: expected a PyCapsule, got {type(capsule).__name__}")
         want = _builtin_capsule_signature()
-        if _normalise(got) != _normalise(want):
-            raise ConfigError(
-                f"reward term {name!r}: the function's signature is {got!r}, expected {want!r} "
-                f"(sd_reward_term_fn: {SIGNATURE})"
-            )
-        address = _capsule_pointer(capsule, got)
+        address = capsule_address(f"reward term {name!r}", capsule, want, f"sd_reward_term_fn: {SIGNATURE}")
         return cls(name, address, tuple(args), "cython", doc, owner if owner is not None else capsule)
 
 
@@ -426,36 +402,11 @@ def _check_width(n: int) -> None:
 
 
 # capsules ------------------------------------------------------------------------------------
-_capsule_get_name = ctypes.pythonapi.PyCapsule_GetName
-_capsule_get_name.restype = ctypes.c_char_p
-_capsule_get_name.argtypes = [ctypes.py_object]
-_capsule_get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
-_capsule_get_pointer.restype = ctypes.c_void_p
-_capsule_get_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
-
-
-def _capsule_name(obj: object) -> str | None:
-    if type(obj).__name__ != "PyCapsule":
-        return None
-    name = _capsule_get_name(obj)
-    return name.decode() if name is not None else ""
-
-
-def _capsule_pointer(capsule: object, name: str) -> int:
-    return int(_capsule_get_pointer(capsule, name.encode()))
-
-
 def _builtin_capsule_signature() -> str:
     """The signature string Cython gives a function of the ABI's type (the library's own
     collision term, compiled against the same declarations a user's module cimports)."""
     from selfplaydrive._sim import reward as kernels
 
-    name = _capsule_name(kernels.__pyx_capi__["term_collision"])
+    name = capsule_name(kernels.__pyx_capi__["term_collision"])
     assert name is not None
     return name
-
-
-def _normalise(sig: str) -> str:
-    return " ".join(
-        sig.replace("*", " * ").replace(",", " , ").replace("(", " ( ").replace(")", " ) ").split()
-    )
