@@ -194,18 +194,18 @@ def test_09_encoder_numba_selects_checks_and_trains(tmp_path):
     assert "'updates': 2" in out
 
 
-# --- 09: a physics model as a numba cfunc ----------------------------------------------------
-def test_09_physics_numba_runs_and_passes_the_checker(tmp_path):
+# --- 10: a physics model as a numba cfunc ----------------------------------------------------
+def test_10_physics_numba_runs_and_passes_the_checker(tmp_path):
     pytest.importorskip("numba")
-    out = run_example("09_physics_numba.py", tmp_path)
+    out = run_example("10_physics_numba.py", tmp_path)
     assert "check_physics: passed" in out and "unicycle:" in out
 
 
-def test_09_is_selected_by_one_hydra_override():
+def test_10_is_selected_by_one_hydra_override():
     pytest.importorskip("numba")
     from selfplaydrive.builder import build_env, compose
 
-    target = f"{EXAMPLES / '09_physics_numba.py'}:unicycle"
+    target = f"{EXAMPLES / '10_physics_numba.py'}:unicycle"
     cfg = compose("sim", ["physics=custom", f"physics.model.target={target}", "env.num_worlds=1"])
     env = build_env(cfg)
     assert env.physics.name == "unicycle" and env.physics.form == "numba"
@@ -215,13 +215,13 @@ def test_09_is_selected_by_one_hydra_override():
     assert np.all(np.isfinite(env.buffers["x"]))
 
 
-def test_09_unicycle_hand_computed():
+def test_10_unicycle_hand_computed():
     """No acceleration, no drag, no turn: every car moves v * 2 s in 2 s along its heading; then
     a yaw rate of 10 deg/s for 1 s turns it by 10 deg (gains set to 1)."""
     pytest.importorskip("numba")
     from selfplaydrive import make_env
 
-    ex = load_example("09_physics_numba.py")
+    ex = load_example("10_physics_numba.py")
     env = make_env("default", num_worlds=2, physics=ex.unicycle(drag=0.0), seed=0)
     env.reset(seed=0)
     b = env.buffers
@@ -240,16 +240,16 @@ def test_09_unicycle_hand_computed():
     np.testing.assert_allclose(turned, np.deg2rad(10.0), atol=1e-5)
 
 
-# --- 10: the same physics model in Cython, as its own package ---------------------------------
-def test_10_physics_cython_runs(tmp_path):
-    out = run_example("10_physics_cython.py", tmp_path)
+# --- 11: the same physics model in Cython, as its own package ---------------------------------
+def test_11_physics_cython_runs(tmp_path):
+    out = run_example("11_physics_cython.py", tmp_path)
     assert "check_physics: passed" in out and "unicycle (cython):" in out
 
 
-def test_10_cython_package_matches_the_numba_model_and_loads_by_name(tmp_path, monkeypatch):
+def test_11_cython_package_matches_the_numba_model_and_loads_by_name(tmp_path, monkeypatch):
     """Built against get_include(), the package's model is selected by `load_physics` (what
     `physics=custom physics.model.target=unicycle_physics:unicycle` calls) and drives the same
-    rollout as example 09's numba cfunc, to float32 rounding."""
+    rollout as example 10's numba cfunc, to float32 rounding."""
     from selfplaydrive import make_env
     from selfplaydrive.physics import load_physics
     from selfplaydrive.testing.build import build_component_package
@@ -261,7 +261,7 @@ def test_10_cython_package_matches_the_numba_model_and_loads_by_name(tmp_path, m
     envs = [make_env("default", num_worlds=2, physics=model, seed=0)]
     if importlib.util.find_spec("numba") is not None:
         envs.append(
-            make_env("default", num_worlds=2, physics=load_example("09_physics_numba.py").unicycle(), seed=0)
+            make_env("default", num_worlds=2, physics=load_example("10_physics_numba.py").unicycle(), seed=0)
         )
     rng = np.random.default_rng(0)
     for env in envs:

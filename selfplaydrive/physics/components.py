@@ -284,7 +284,7 @@ def load_physics(target: str, **kwargs: Any) -> Any:
     """The physics model named by `target`: ``"package.module:attr"`` or
     ``"path/to/file.py:attr"``; `attr` is a model or a factory called with `kwargs`. Lets Hydra
     select a model defined outside the package in one override
-    (``physics=custom physics.model.target=examples/09_physics_numba.py:unicycle``).
+    (``physics=custom physics.model.target=examples/10_physics_numba.py:unicycle``).
 
     Raises:
         ConfigError: A malformed target, a module or attribute that does not exist, or an

@@ -1,6 +1,6 @@
 # cython: language_level=3
 """Kinematic unicycle with quadratic drag as a selfplaydrive physics component (the model of
-examples/09_physics_numba.py in Cython). Actions: acceleration [m/s^2] and yaw rate [rad/s]
+examples/10_physics_numba.py in Cython). Actions: acceleration [m/s^2] and yaw rate [rad/s]
 from the model's value tables, times the hidden gains; args: max_speed [m/s], drag [1/m]."""
 
 from libc.math cimport cos, sin, M_PI

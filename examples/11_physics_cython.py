@@ -1,4 +1,4 @@
-"""Example 10: the unicycle of example 09 as a Cython physics model in its own package.
+"""Example 11: the unicycle of example 10 as a Cython physics model in its own package.
 
 examples/unicycle_cython/ is a tiny package with its own pyproject.toml: its `.pyx` cimports
 the ABI's declarations (`from selfplaydrive_abi cimport Sim, Params`) from the folder
@@ -12,7 +12,7 @@ the parallel loop, like the paper's bicycle). Install it once:
 and select it in one Hydra override: `physics=custom physics.model.target=unicycle_physics:unicycle`.
 Without it installed, this script builds it into a temporary folder first (a few seconds).
 
-Run: python examples/10_physics_cython.py [--tiny]
+Run: python examples/11_physics_cython.py [--tiny]
 """
 
 from __future__ import annotations

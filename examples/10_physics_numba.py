@@ -1,4 +1,4 @@
-"""Example 09: a physics model written outside the package, as a numba cfunc (needs the `numba`
+"""Example 10: a physics model written outside the package, as a numba cfunc (needs the `numba`
 extra): a kinematic unicycle with quadratic drag.
 
 The cfunc has the C signature of every physics component (`sd_physics_fn` in
@@ -16,9 +16,9 @@ moves v dt along the new heading. No slip, no friction limit: an ablation agains
 
 Select it in one Hydra override:
 
-    selfplaydrive train physics=custom physics.model.target=examples/09_physics_numba.py:unicycle
+    selfplaydrive train physics=custom physics.model.target=examples/10_physics_numba.py:unicycle
 
-Run: python examples/09_physics_numba.py [--tiny]   (pip install 'selfplaydrive[numba]')
+Run: python examples/10_physics_numba.py [--tiny]   (pip install 'selfplaydrive[numba]')
 """
 
 from __future__ import annotations
