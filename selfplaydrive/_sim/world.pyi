@@ -13,6 +13,7 @@ class World:
         self,
         dims: dict[str, Any],
         state: dict[str, Any],
+        layout: tuple[list[tuple[str, int, np.dtype[Any] | None]], int],
         atlas: dict[str, Any],
         params: dict[str, Any],
         terms: list[tuple[int, NDArray[np.float32] | None, float, int]],

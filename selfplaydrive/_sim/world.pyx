@@ -86,8 +86,10 @@ cdef class World:
     """Owns pointers into the env's buffers and steps all worlds.
 
     Args:
-        dims: W, A, S, P, K, T, G, max_obj, max_road, cand_cap, obs_dim.
+        dims: The `Dims` fields (the dimension rows of the schema, sim/schema.py).
         state: Buffers named as the `Sim` fields (sim/buffers.py allocates them).
+        layout: (fields, size) of `sd_sim` from the schema (sim/schema.py `struct_layout`):
+            per field its name, byte offset and buffer dtype (None: a dimension of `dims`).
         atlas: Concatenated map arrays named as the `Atlas` fields (sim/atlas.py).
         params: Scalars named as the `Params` fields plus accel_table, steer_table, coeff_scale.
         terms: One (address, args, weight, native) per column of the `terms` buffer, in column
@@ -113,13 +115,11 @@ cdef class World:
     cdef list keep
     cdef public dict timings
 
-    def __init__(self, dict dims, dict state, dict atlas, dict params, list terms, tuple physics,
-                 encoder=None):
+    def __init__(self, dict dims, dict state, tuple layout, dict atlas, dict params, list terms,
+                 tuple physics, encoder=None):
         self.keep = []
         self.timings = {name: 0.0 for name in STAGES + ("reset",)}
-        self._bind_dims(dims)
-        self._bind_agents(state)
-        self._bind_others(state)
+        self._bind_state(dims, state, layout)
         self._bind_atlas(atlas)
         self._bind_params(params)
         self._bind_terms(terms, state)
@@ -175,67 +175,24 @@ cdef class World:
                 self.slots[k].args = <const float*>ptr({"args": args}, "args", np.float32, self.keep)
             self.slots[k].weight = weight
 
-    def _bind_dims(self, dict d):
-        self.sim.W = d["W"]; self.sim.A = d["A"]; self.sim.S = d["S"]; self.sim.P = d["P"]
-        self.sim.K = d["K"]; self.sim.T = d["T"]; self.sim.G = d["G"]
-        self.sim.max_obj = d["max_obj"]; self.sim.max_road = d["max_road"]
-        self.sim.cand_cap = d["cand_cap"]; self.sim.obs_dim = d["obs_dim"]
-        self.sim.num_terms = d["num_terms"]
-        self.sim.act_dim = d["act_dim"]; self.sim.phys_dim = d["phys_dim"]
-
-    def _bind_agents(self, dict s):
-        cdef list k = self.keep
-        f4, u1, i4 = np.float32, np.uint8, np.int32
-        self.sim.x = <float*>ptr(s, "x", f4, k); self.sim.y = <float*>ptr(s, "y", f4, k)
-        self.sim.heading = <float*>ptr(s, "heading", f4, k)
-        self.sim.hcos = <float*>ptr(s, "hcos", f4, k); self.sim.hsin = <float*>ptr(s, "hsin", f4, k)
-        self.sim.speed = <float*>ptr(s, "speed", f4, k)
-        self.sim.px = <float*>ptr(s, "px", f4, k); self.sim.py = <float*>ptr(s, "py", f4, k)
-        self.sim.pheading = <float*>ptr(s, "pheading", f4, k)
-        self.sim.length = <float*>ptr(s, "length", f4, k); self.sim.width = <float*>ptr(s, "width", f4, k)
-        self.sim.a_long = <float*>ptr(s, "a_long", f4, k); self.sim.a_lat = <float*>ptr(s, "a_lat", f4, k)
-        self.sim.coeffs = <float*>ptr(s, "coeffs", f4, k); self.sim.hidden = <float*>ptr(s, "hidden", f4, k)
-        self.sim.waypoints = <float*>ptr(s, "waypoints", f4, k)
-        self.sim.num_wp = <int32_t*>ptr(s, "num_wp", i4, k); self.sim.wp_idx = <int32_t*>ptr(s, "wp_idx", i4, k)
-        self.sim.active = <uint8_t*>ptr(s, "active", u1, k); self.sim.obstacle = <uint8_t*>ptr(s, "obstacle", u1, k)
-        self.sim.lane_s = <float*>ptr(s, "lane_s", f4, k); self.sim.lane_alpha = <float*>ptr(s, "lane_alpha", f4, k)
-        self.sim.lane_valid = <uint8_t*>ptr(s, "lane_valid", u1, k)
-        self.sim.events = <uint8_t*>ptr(s, "events", u1, k); self.sim.ever = <uint8_t*>ptr(s, "ever", u1, k)
-        self.sim.road_idx = <int32_t*>ptr(s, "road_idx", i4, k); self.sim.road_n = <int32_t*>ptr(s, "road_n", i4, k)
-        self.sim.obj_rows = <int32_t*>ptr(s, "obj_rows", i4, k)
-        self.sim.road_rows = <int32_t*>ptr(s, "road_rows", i4, k)
-        self.sim.road_r = <float*>ptr(s, "road_r", f4, k)
-        self.sim.road_x = <float*>ptr(s, "road_x", f4, k); self.sim.road_y = <float*>ptr(s, "road_y", f4, k)
-        self.sim.act_i = <int32_t*>ptr(s, "act_i", i4, k); self.sim.act_f = <float*>ptr(s, "act_f", f4, k)
-        self.sim.reward = <float*>ptr(s, "reward", f4, k); self.sim.terms = <float*>ptr(s, "terms", f4, k)
-        self.sim.term = <uint8_t*>ptr(s, "term", u1, k); self.sim.trunc = <uint8_t*>ptr(s, "trunc", u1, k)
-        self.sim.obs = <float*>ptr(s, "obs", f4, k); self.sim.final_obs = <float*>ptr(s, "final_obs", f4, k)
-
-    def _bind_others(self, dict s):
-        cdef list k = self.keep
-        f4, f8, u1, i1, i4, i8, u8 = np.float32, np.float64, np.uint8, np.int8, np.int32, np.int64, np.uint64
-        self.sim.st_x = <float*>ptr(s, "st_x", f4, k); self.sim.st_y = <float*>ptr(s, "st_y", f4, k)
-        self.sim.st_cos = <float*>ptr(s, "st_cos", f4, k); self.sim.st_sin = <float*>ptr(s, "st_sin", f4, k)
-        self.sim.st_len = <float*>ptr(s, "st_len", f4, k); self.sim.st_wid = <float*>ptr(s, "st_wid", f4, k)
-        self.sim.st_valid = <uint8_t*>ptr(s, "st_valid", u1, k)
-        self.sim.ped_path = <float*>ptr(s, "ped_path", f4, k); self.sim.ped_np = <int32_t*>ptr(s, "ped_np", i4, k)
-        self.sim.ped_speed = <float*>ptr(s, "ped_speed", f4, k); self.sim.ped_start = <float*>ptr(s, "ped_start", f4, k)
-        self.sim.ped_len = <float*>ptr(s, "ped_len", f4, k); self.sim.ped_wid = <float*>ptr(s, "ped_wid", f4, k)
-        self.sim.ped_valid = <uint8_t*>ptr(s, "ped_valid", u1, k); self.sim.ped_here = <uint8_t*>ptr(s, "ped_here", u1, k)
-        self.sim.ped_x = <float*>ptr(s, "ped_x", f4, k); self.sim.ped_y = <float*>ptr(s, "ped_y", f4, k)
-        self.sim.ped_px = <float*>ptr(s, "ped_px", f4, k); self.sim.ped_py = <float*>ptr(s, "ped_py", f4, k)
-        self.sim.ped_cos = <float*>ptr(s, "ped_cos", f4, k); self.sim.ped_sin = <float*>ptr(s, "ped_sin", f4, k)
-        self.sim.ped_vx = <float*>ptr(s, "ped_vx", f4, k); self.sim.ped_vy = <float*>ptr(s, "ped_vy", f4, k)
-        self.sim.light_state = <int8_t*>ptr(s, "light_state", i1, k)
-        self.sim.light_time = <float*>ptr(s, "light_time", f4, k)
-        self.sim.map_id = <int32_t*>ptr(s, "map_id", i4, k); self.sim.step = <int32_t*>ptr(s, "step", i4, k)
-        self.sim.max_steps = <int32_t*>ptr(s, "max_steps", i4, k)
-        self.sim.lights_on = <uint8_t*>ptr(s, "lights_on", u1, k); self.sim.done = <uint8_t*>ptr(s, "done", u1, k)
-        self.sim.rng_key = <uint64_t*>ptr(s, "rng_key", u8, k); self.sim.rng_ctr = <uint64_t*>ptr(s, "rng_ctr", u8, k)
-        self.sim.term_sum = <double*>ptr(s, "term_sum", f8, k); self.sim.ev_count = <int64_t*>ptr(s, "ev_count", i8, k)
-        self.sim.dist = <double*>ptr(s, "dist", f8, k)
-        self.sim.cand = <int32_t*>ptr(s, "cand", i4, k); self.sim.cand_d = <float*>ptr(s, "cand_d", f4, k)
-        self.sim.phys_state = <float*>ptr(s, "phys_state", f4, k)
+    def _bind_state(self, dict dims, dict s, tuple layout):
+        """Fill `sd_sim` from the schema (sim/schema.py `struct_layout`): each dimension from
+        `dims`, each pointer from the buffer of its name (dtype and C-contiguity checked), at
+        the byte offset the schema computed from the field order and C types (the offsets are
+        those of the compiled struct: same order and types, tests/sim/test_schema.py)."""
+        cdef char* base = <char*>&self.sim
+        cdef Py_ssize_t offset
+        fields, size = layout
+        if size != sizeof(Sim):
+            raise ValueError(f"state layout: expected sizeof(sd_sim) = {sizeof(Sim)} bytes (the compiled "
+                             f"struct), got {size}: the schema table and selfplaydrive_abi.h differ")
+        for name, offset, dtype in fields:
+            if not 0 <= offset <= size - sizeof(void*):
+                raise ValueError(f"state layout: field {name!r} at byte {offset}, outside sd_sim")
+            if dtype is None:
+                (<int*>(base + offset))[0] = <int>dims[name]
+            else:
+                (<void**>(base + offset))[0] = ptr(s, name, dtype, self.keep)
 
     def _bind_atlas(self, dict a):
         cdef list k = self.keep

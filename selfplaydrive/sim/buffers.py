@@ -1,7 +1,8 @@
-"""Allocation of the simulator's struct-of-arrays buffers and packing of a `Scenario`.
+"""Allocation of the simulator's struct-of-arrays buffers, checks and packing of a `Scenario`.
 
-Array names are the `Sim` field names of _sim/common.pxd; shapes use W worlds, A agent slots,
-S static slots, P pedestrian slots, K waypoints, T path points, G signal groups, N = W * A.
+Names, shapes, dtypes and units come from the schema table (sim/schema.py), whose rows are the
+fields of `sd_sim` (include/selfplaydrive_abi.h); shapes use W worlds, A agent slots, S static
+slots, P pedestrian slots, K waypoints, T path points, G signal groups, N = W * A.
 """
 
 from __future__ import annotations
@@ -12,10 +13,19 @@ import numpy as np
 
 from selfplaydrive._sim.events import collision_scratch
 from selfplaydrive._sim.observe import body_scratch
-from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS, Scenario
+from selfplaydrive.scenario.types import Scenario
+from selfplaydrive.sim.schema import (
+    KINDS,
+    NUM_STATS,
+    SCENARIO_FIELDS,
+    ScenarioField,
+    buffer_fields,
+    resolve,
+    sizes_of,
+)
 
 NUM_TERMS = 8  # the paper's reward terms (section 2.3): the default number of term columns
-NUM_STATS = 8
+__all__ = ["NUM_STATS", "NUM_TERMS", "Dims", "allocate", "buffer_bytes", "check_scenario", "pack"]
 
 
 @dataclass(frozen=True)
@@ -67,97 +77,47 @@ def _kernel_scratch(A: int, S: int, P: int) -> int:
 
 
 def allocate(d: Dims) -> dict[str, np.ndarray]:
-    """Zeroed buffers for all worlds (the kernels never clear them wholesale)."""
-    b = {name: np.zeros(shape, dtype=dtype) for name, (shape, dtype) in _shapes(d).items()}
-    b["road_r"][:] = -1.0  # no road gather yet: the first one searches without a hint
+    """Buffers for all worlds, one per buffer row of the schema (sim/schema.py `SIM_FIELDS`),
+    C-contiguous, in table order, filled with the row's `fill` (0 but for `road_r`: no road
+    gather yet, the first one searches without a hint); the kernels never clear them wholesale."""
+    sizes = sizes_of(d)
+    b = {}
+    for f in buffer_fields():
+        b[f.name] = np.zeros(resolve(f.shape, sizes), dtype=f.dtype)
+        if f.fill:
+            b[f.name][:] = f.fill
     return b
 
 
 def buffer_bytes(d: Dims) -> int:
     """Bytes `allocate(d)` would take, computed without allocating (to refuse a num_worlds
     that cannot fit before the allocation succeeds lazily and the first touch runs out)."""
+    sizes = sizes_of(d)
     return sum(
-        int(np.prod(shape, dtype=np.int64)) * np.dtype(dt).itemsize for shape, dt in _shapes(d).values()
+        int(np.prod(resolve(f.shape, sizes), dtype=np.int64)) * f.dtype.itemsize for f in buffer_fields()
     )
-
-
-def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
-    """Shape and dtype of every buffer."""
-    N, f4, u1, i4 = d.W * d.A, np.float32, np.uint8, np.int32
-    shapes: dict[str, tuple[tuple[int, ...], type]] = {}
-    for name in (
-        "x y heading hcos hsin speed px py pheading length width a_long a_lat lane_s lane_alpha reward "
-        "road_r road_x road_y"
-    ).split():
-        shapes[name] = ((N,), f4)
-    for name in "num_wp wp_idx road_n obj_rows road_rows".split():
-        shapes[name] = ((N,), i4)
-    for name in "agent_valid active obstacle lane_valid events ever term trunc".split():
-        shapes[name] = ((N,), u1)
-    shapes.update(
-        coeffs=((N, len(COEFF_NAMES)), f4),
-        hidden=((N, len(HIDDEN_PARAMS)), f4),
-        waypoints=((N, d.K, 2), f4),
-        road_idx=((N, d.max_road), i4),
-        act_i=((N, d.act_dim), i4),
-        act_f=((N, d.act_dim), f4),
-        phys_state=((N, d.phys_dim), f4),
-        terms=((N, d.num_terms), f4),
-        obs=((N, d.obs_dim), f4),
-        final_obs=((N, d.obs_dim), f4),
-        st_valid=((d.W * d.S,), u1),
-        ped_path=((d.W * d.P, d.T, 2), f4),
-        ped_np=((d.W * d.P,), i4),
-        ped_valid=((d.W * d.P,), u1),
-        ped_here=((d.W * d.P,), u1),
-        light_state=((d.W * d.G,), np.int8),
-        light_time=((d.W * d.G,), f4),
-        map_id=((d.W,), i4),
-        step=((d.W,), i4),
-        max_steps=((d.W,), i4),
-        lights_on=((d.W,), u1),
-        done=((d.W,), u1),
-        rng_key=((d.W,), np.uint64),
-        rng_ctr=((d.W,), np.uint64),
-        term_sum=((d.W, d.num_terms), np.float64),
-        ev_count=((d.W, NUM_STATS), np.int64),
-        dist=((d.W,), np.float64),
-        cand=((d.W, d.cand_cap), i4),
-        cand_d=((d.W, d.cand_cap), f4),
-    )
-    for name in "st_x st_y st_cos st_sin st_len st_wid".split():
-        shapes[name] = ((d.W * d.S,), f4)
-    for name in (
-        "ped_speed ped_start ped_len ped_wid ped_x ped_y ped_px ped_py ped_cos ped_sin ped_vx ped_vy".split()
-    ):
-        shapes[name] = ((d.W * d.P,), f4)
-    return shapes
 
 
 def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
-    """Raise ValueError when `sc` does not fit the env's slots."""
-    expect = {
-        "agent_valid": (d.A,),
-        "agent_xy": (d.A, 2),
-        "waypoints": (d.A, d.K, 2),
-        "coeffs": (d.A, len(COEFF_NAMES)),
-        "hidden": (d.A, len(HIDDEN_PARAMS)),
-        "static_valid": (d.S,),
-        "static_xy": (d.S, 2),
-        "ped_valid": (d.P,),
-        "ped_path": (d.P, d.T, 2),
-    }
-    for name, shape in expect.items():
-        got = np.shape(getattr(sc, name))
-        if got != shape:
-            raise ValueError(f"scenario.{name}: expected shape {shape} (the env's slot counts), got {got}")
-    _check_counts(sc, d)
-    _check_bodies(sc)
+    """Raise ValueError when `sc` does not fit the env's slots: the shape, dtype kind and values
+    of every field of `SCENARIO_FIELDS` (sim/schema.py), the map index, the signal groups and
+    the episode length."""
+    sizes = sizes_of(d)
+    for f in SCENARIO_FIELDS:
+        _check_field(sc, f, sizes)
+    for f in SCENARIO_FIELDS:
+        if f.check == "count":
+            _check_count(sc, f, sizes[f.bound])
+    _check_values(sc)
     if not 0 <= sc.map_index < num_maps:
         raise ValueError(f"scenario.map_index: expected an index in [0, {num_maps}), got {sc.map_index}")
-    if len(sc.light_state) > d.G:
+    ng = len(sc.light_state)
+    if ng > d.G:
+        raise ValueError(f"scenario.light_state: expected at most {d.G} signal groups, got {ng}")
+    if np.shape(sc.light_time_left) != (ng,):
         raise ValueError(
-            f"scenario.light_state: expected at most {d.G} signal groups, got {len(sc.light_state)}"
+            f"scenario.light_time_left: expected shape ({ng},) (one per light_state group), got "
+            f"{np.shape(sc.light_time_left)}"
         )
     if not (np.isfinite(sc.episode_length) and sc.episode_length > 0):
         raise ValueError(
@@ -165,73 +125,79 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
         )
 
 
-def _check_counts(sc: Scenario, d: Dims) -> None:
+def _check_field(sc: Scenario, f: ScenarioField, sizes: dict[str, int]) -> None:
+    """Shape (in the env's slot counts) and dtype kind of one field."""
+    a = getattr(sc, f.name)
+    if f.shape is not None:
+        shape, got = resolve(f.shape, sizes), np.shape(a)
+        if got != shape:
+            raise ValueError(f"scenario.{f.name}: expected shape {shape} (the env's slot counts), got {got}")
+    kind = np.asarray(a).dtype
+    if kind.kind not in KINDS[f.kind]:
+        raise ValueError(
+            f"scenario.{f.name}: expected a {f.kind} array (dtype kind in {KINDS[f.kind]!r}), "
+            f"got dtype {kind}"
+        )
+
+
+def _check_count(sc: Scenario, f: ScenarioField, cap: int) -> None:
     """The kernels index waypoints[i, :num_waypoints] and ped_path[k, :ped_num_points] without
     bounds checks: a count past the slot size would read past the row (and past the buffer in
     the last world), so it is refused here, as are non-finite points within the counts."""
-    for name, points, valid, cap, what in (
-        ("num_waypoints", "waypoints", sc.agent_valid, d.K, "max_waypoints"),
-        ("ped_num_points", "ped_path", sc.ped_valid, d.T, "path points"),
-    ):
-        slots = np.flatnonzero(np.asarray(valid, dtype=bool))
-        n = np.asarray(getattr(sc, name))[slots]
-        if n.size and not (n.min() >= 0 and n.max() <= cap):
-            k = int(np.flatnonzero((n < 0) | (n > cap))[0])
-            raise ValueError(
-                f"scenario.{name}: expected counts in [0, {cap}] ({what}) for valid slots, got {int(n[k])} "
-                f"in slot {int(slots[k])}"
-            )
-        pts = np.asarray(getattr(sc, points), dtype=np.float64)
-        if np.isfinite(pts).all():
-            continue  # the common case: no search for the first bad point
-        used = np.arange(cap)[None, :] < n[:, None]
-        pts = pts[slots]
-        bad = (used & ~np.isfinite(pts).all(axis=-1)).any(axis=1)
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise ValueError(
-                f"scenario.{points}: expected finite points [m] within the first {name} of each valid "
-                f"slot, got {pts[k][used[k]].tolist()} in slot {int(slots[k])}"
-            )
+    slots = np.flatnonzero(np.asarray(getattr(sc, f.valid), dtype=bool))
+    n = np.asarray(getattr(sc, f.name))[slots]
+    if n.size and not (n.min() >= 0 and n.max() <= cap):
+        k = int(np.flatnonzero((n < 0) | (n > cap))[0])
+        raise ValueError(
+            f"scenario.{f.name}: expected counts in [0, {cap}] ({f.what}) for valid slots, got {int(n[k])} "
+            f"in slot {int(slots[k])}"
+        )
+    for p in SCENARIO_FIELDS:
+        if p.check == "points" and p.bound == f.name:
+            _check_points(sc, p, slots, n, cap)
 
 
-_BODY_FIELDS = (
-    (
-        "agent",
-        "agent_valid",
-        ("agent_xy", "agent_heading", "agent_speed", "coeffs", "hidden"),
-        ("agent_length", "agent_width"),
-    ),
-    ("static", "static_valid", ("static_xy", "static_heading"), ("static_length", "static_width")),
-    ("pedestrian", "ped_valid", ("ped_speed", "ped_start_time"), ("ped_size",)),
-)
+def _check_points(sc: Scenario, p: ScenarioField, slots: np.ndarray, n: np.ndarray, cap: int) -> None:
+    pts = np.asarray(getattr(sc, p.name), dtype=np.float64)
+    if np.isfinite(pts).all():
+        return  # the common case: no search for the first bad point
+    used = np.arange(cap)[None, :] < n[:, None]
+    pts = pts[slots]
+    bad = (used & ~np.isfinite(pts).all(axis=-1)).any(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"scenario.{p.name}: expected finite points [{p.unit}] within the first {p.bound} of each valid "
+            f"slot, got {pts[k][used[k]].tolist()} in slot {int(slots[k])}"
+        )
 
 
-def _check_bodies(sc: Scenario) -> None:
-    """Finite positions and headings and positive finite sizes for every valid body: a zero
-    length gives the bicycle model a 0/0 (section 2.6), a NaN position would be clipped away
-    in the observation instead of raising. One pass over all values first (a reset should
-    stay cheap); the field-by-field search only runs to name a bad value."""
-    vals, sizes = [], []
-    for _, valid, fields, size_fields in _BODY_FIELDS:
-        v = np.asarray(getattr(sc, valid), dtype=bool)
-        vals += [np.asarray(getattr(sc, n), dtype=np.float64)[v].ravel() for n in fields]
-        sizes += [np.asarray(getattr(sc, n), dtype=np.float64)[v].ravel() for n in size_fields]
-    flat, size = np.concatenate(vals), np.concatenate(sizes)
-    if np.isfinite(flat).all() and ((size > 0) & (size < np.inf)).all():
+_GROUPS = {"agent_valid": "agent", "static_valid": "static", "ped_valid": "pedestrian"}
+
+
+def _check_values(sc: Scenario) -> None:
+    """Finite values and positive finite sizes of every valid body (the "finite" and "size" rows
+    of `SCENARIO_FIELDS`): a zero length gives the bicycle model a 0/0 (section 2.6), a NaN
+    position would be clipped away in the observation instead of raising. One pass over all
+    values first (a reset should stay cheap); the field-by-field search only runs to name a bad
+    value."""
+    rows = [f for f in SCENARIO_FIELDS if f.check in ("finite", "size")]
+    masks = {f.valid: np.asarray(getattr(sc, f.valid), dtype=bool) for f in rows}
+    vals = [np.asarray(getattr(sc, f.name), dtype=np.float64)[masks[f.valid]].ravel() for f in rows]
+    finite = np.concatenate([v for v, f in zip(vals, rows, strict=True) if f.check == "finite"])
+    size = np.concatenate([v for v, f in zip(vals, rows, strict=True) if f.check == "size"])
+    if np.isfinite(finite).all() and ((size > 0) & (size < np.inf)).all():
         return
-    for group, valid, fields, size_fields in _BODY_FIELDS:
-        v = np.asarray(getattr(sc, valid), dtype=bool)
-        for name in fields + size_fields:
-            x = np.asarray(getattr(sc, name), dtype=np.float64)[v]
-            bad = ~np.isfinite(x) if name in fields else ~(np.isfinite(x) & (x > 0))
-            if bad.any():
-                k = int(np.flatnonzero(bad.reshape(len(x), -1).any(axis=1))[0])
-                want = "finite values" if name in fields else "positive finite sizes [m]"
-                raise ValueError(
-                    f"scenario.{name}: expected {want} for valid {group} slots, got {x[k].tolist()} "
-                    f"in slot {int(np.flatnonzero(v)[k])}"
-                )
+    for f in rows:
+        x = np.asarray(getattr(sc, f.name), dtype=np.float64)[masks[f.valid]]
+        bad = ~np.isfinite(x) if f.check == "finite" else ~(np.isfinite(x) & (x > 0))
+        if bad.any():
+            k = int(np.flatnonzero(bad.reshape(len(x), -1).any(axis=1))[0])
+            want = "finite values" if f.check == "finite" else f"positive finite sizes [{f.unit}]"
+            raise ValueError(
+                f"scenario.{f.name}: expected {want} for valid {_GROUPS[f.valid]} slots, got {x[k].tolist()} "
+                f"in slot {int(np.flatnonzero(masks[f.valid])[k])}"
+            )
 
 
 def pack(b: dict[str, np.ndarray], d: Dims, w: int, sc: Scenario, dt: float, rng_key: int) -> None:

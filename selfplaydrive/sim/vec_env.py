@@ -44,6 +44,7 @@ from selfplaydrive.sim.actions import BoxActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
 from selfplaydrive.sim.params import SimParams
+from selfplaydrive.sim.schema import struct_layout
 
 _FAST_ACTION_DTYPES = (np.dtype(np.int32), np.dtype(np.int64))
 EVER_BITS = {"collision": 1, "pedestrian_collision": 2, "offroad": 4, "red_light": 8}
@@ -191,6 +192,7 @@ class VecEnv:
         self._world = World(
             self.dims.__dict__,
             self.buffers,
+            struct_layout(),
             self.atlas,
             self._kernel_params(),
             self.reward.plan(),
