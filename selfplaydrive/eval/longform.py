@@ -10,17 +10,17 @@ Protocol (reference/metrics.md section 2.4):
   resampled (autoreset) and its new agents count afresh;
 - an agent that reaches its last waypoint gets a new route from where it is: `WaypointRefresher`
   localises it on the nearest lane of matching direction, walks a random legal route from there
-  (`maps.routing.sample_routes`, the spawner's rule) and writes up to K new waypoints into its
-  slots of the env's `waypoints`, `num_wp` and `wp_idx` buffers;
+  (`maps.routing.sample_routes`, the spawner's rule) and gives it up to K new waypoints
+  (`VecEnv.set_waypoints`);
 - incidents are onsets (rising edges) of the per-step event bits of agents that acted:
   vehicle collision, pedestrian collision, road-edge contact; red-light onsets are counted
   apart. Distance is the simulator's own odometer (`state.dist`, all agents). Intervals: Garwood
   for rates, inverted Garwood for km between incidents (docs/metrics.md section 2).
 
-Buffers written from Python (the simulator offers no API for new waypoints): `env.buffers`
-"waypoints" (rows of the refreshed agents), "num_wp" and "wp_idx". The kernels read them at the
-next step; the observation of the step in which the last waypoint was reached still shows the
-old (exhausted) waypoints, a one-step lag.
+New routes go through `VecEnv.set_waypoints` (the refreshed agents' waypoints and counts, the
+current waypoint back to the first). The kernels read them at the next step; the observation of
+the step in which the last waypoint was reached still shows the old (exhausted) waypoints, a
+one-step lag.
 
 Example:
     >>> from selfplaydrive.eval.longform import RuleBasedPolicy, run_longform
@@ -157,8 +157,7 @@ class WaypointRefresher:
         lane, s, found = self.localise(idx)
         self.unplaced += int((~found).sum())
         idx, lane, s = idx[found], lane[found], s[found]
-        b, T = self.env.buffers, self.lanes
-        K = b["waypoints"].shape[1]
+        T, K = self.lanes, self.env.dims.K
         for m in np.unique(T.lane_map[lane]):
             sel = T.lane_map[lane] == m
             rows, local = idx[sel], lane[sel] - T.lane_base[m]
@@ -166,9 +165,7 @@ class WaypointRefresher:
             times = waypoint_times(self.rng, len(rows), K, self.spacing_s, self.jitter)
             routes = sample_routes(tables, local, s[sel], times[:, -1], self.rng, self.lane_change_prob)
             wps, count = batch_waypoints(tables, routes, times)
-            b["waypoints"][rows] = wps
-            b["num_wp"][rows] = count
-            b["wp_idx"][rows] = 0
+            self.env.set_waypoints(rows, wps, count)
         self.refreshed += len(idx)
         return len(idx)
 

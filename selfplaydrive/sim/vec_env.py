@@ -40,6 +40,7 @@ from selfplaydrive.physics.components import PhysicsModel
 from selfplaydrive.physics.models import FrictionBicycleModel
 from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
+from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.sim.actions import BoxActions, DiscreteActions
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
@@ -344,12 +345,15 @@ class VecEnv:
             accel, steer = a[:, 0], a[:, 1]
         self.physics.step(self.buffers, self.params.dt, accel, steer)
 
-    def _reset_worlds(self, worlds: np.ndarray, first=None) -> None:
+    def _reset_worlds(self, worlds: np.ndarray, first=None, given: Sequence[Scenario] | None = None) -> None:
         import time
 
         t0 = time.perf_counter()
-        for w in worlds:
-            sc = first if (first is not None and w == 0) else self._sample(int(w))
+        for k, w in enumerate(worlds):
+            if given is not None:
+                sc = given[k]
+            else:
+                sc = first if (first is not None and w == 0) else self._sample(int(w))
             check_scenario(sc, self.dims, len(self.maps))
             key = int(self._world_rngs[int(w)].integers(0, 2**63 - 1))
             pack(self.buffers, self.dims, int(w), sc, self.params.dt, key)
@@ -493,6 +497,74 @@ class VecEnv:
     @property
     def stage_names(self) -> tuple[str, ...]:
         return (*STAGES, "reset")
+
+    # editing a running rollout (sim/edit.py): evaluations that move agents or give new routes --
+    def reset_worlds(
+        self, worlds: Sequence[int] | np.ndarray, scenarios: Sequence[Scenario] | None = None
+    ) -> None:
+        """Start new episodes in `worlds` now, as autoreset does (the episodes they end are not
+        recorded in `episode_stats`).
+
+        Args:
+            worlds: Distinct world indices in [0, num_worlds).
+            scenarios: One `Scenario` per world, checked as a spawner's are; None: each world
+                draws its own from its generator through the spawner.
+
+        Raises:
+            ValueError: A world index out of range or repeated, a number of scenarios other
+                than of worlds, or a scenario that does not fit the env (naming the field).
+        """
+        w = np.asarray(worlds)
+        if w.ndim != 1 or (w.size and w.dtype.kind not in "iu"):
+            raise ValueError(f"worlds: expected a 1-D array of world indices, got {w.dtype} {w.shape}")
+        if w.size and not (w.min() >= 0 and w.max() < self.num_worlds and len(np.unique(w)) == len(w)):
+            raise ValueError(f"worlds: expected distinct indices in [0, {self.num_worlds}), got {w.tolist()}")
+        if scenarios is not None and len(scenarios) != len(w):
+            raise ValueError(f"scenarios: expected one per world ({len(w)}), got {len(scenarios)}")
+        self._reset_worlds(w.astype(np.int32), given=scenarios)
+        self._run_python_obs(None)
+
+    def set_waypoints(
+        self, agents: Sequence[int] | np.ndarray, waypoints: np.ndarray, num_waypoints: np.ndarray
+    ) -> None:
+        """Give `agents` new routes (long-form evaluation, paper section 5): their waypoints,
+        counts, and the current waypoint back to the first. The kernels read them at the next
+        step; the current observation still shows the old route.
+
+        Args:
+            agents: Distinct flat agent indices i = w * A + a.
+            waypoints: (len(agents), K, 2) [m] waypoints, K = `dims.K`; points past an agent's
+                count are padding.
+            num_waypoints: (len(agents),) valid waypoints of each, in [0, K].
+
+        Raises:
+            ValueError: Bad indices, shapes or counts, or a non-finite waypoint within the
+                count (nothing is written then).
+        """
+        from selfplaydrive.sim import edit
+
+        edit.set_waypoints(self, agents, waypoints, num_waypoints)
+
+    def set_poses(
+        self, agents: Sequence[int] | np.ndarray, xy: np.ndarray, heading: np.ndarray, speed: np.ndarray
+    ) -> None:
+        """Move `agents` (log replay, paper section 5.2): box centre, heading (and its cached
+        cos / sin) and speed. The previous pose (px, py, pheading) stays: the next physics step
+        starts from the new pose.
+
+        Args:
+            agents: Distinct flat agent indices i = w * A + a.
+            xy: (len(agents), 2) [m] box centres.
+            heading: (len(agents),) [rad] in [-pi, pi].
+            speed: (len(agents),) [m/s] >= 0.
+
+        Raises:
+            ValueError: Bad indices or shapes, non-finite values, a heading outside [-pi, pi]
+                or a negative speed (nothing is written then).
+        """
+        from selfplaydrive.sim import edit
+
+        edit.set_poses(self, agents, xy, heading, speed)
 
     # saving and restoring a rollout (the format: sim/state.py) ----------------------------------
     def get_state(self) -> dict[str, Any]:

@@ -12,9 +12,9 @@ Per scenario (`run_logged`):
    its coefficients are the fixed evaluation vector (paper section 5). No traffic lights.
 2. The rollout: T - 1 - start steps (80 for WOMD); the ego acts by `policy(obs, env)` (its slot's
    row), the others by the rule-based driver (`others="rule_based"`, the paper's IDM agents) or by
-   log replay (`others="log"`: after every step their pose and speed are overwritten with the
-   log's, `env.buffers` "x", "y", "heading", "hcos", "hsin", "speed"). Agents that end (collision,
-   road edge with the evaluation coefficients) stay as obstacles.
+   log replay (`others="log"`: after every step their pose and speed are set to the log's,
+   `VecEnv.set_poses`). Agents that end (collision, road edge with the evaluation coefficients)
+   stay as obstacles.
 3. Metrics (`waymax_episode`, docs/metrics.md section 3): the ego's boxes over all T steps (log
    history up to `start`, simulated after), its velocity (speed along the heading), collision
    against every other object (simulated agents, static vehicles, pedestrians, and log replay of
@@ -285,14 +285,13 @@ def _record(env: Any, A: int, boxes: np.ndarray, speed: np.ndarray, valid: np.nd
 
 def _replay(env: Any, log: LoggedScenario, idx: np.ndarray, t: int) -> None:
     """Overwrite the pose and speed of agent slots 1.. with the log at step t (where valid)."""
-    b = env.buffers
-    for slot, i in enumerate(idx, start=1):
-        if not log.valid[i, t]:
-            continue  # keeps its last pose; scored with the log's validity
-        h = float(log.heading[i, t])
-        b["x"][slot], b["y"][slot] = log.xy[i, t]
-        b["heading"][slot], b["hcos"][slot], b["hsin"][slot] = h, np.cos(h), np.sin(h)
-        b["speed"][slot] = float(np.linalg.norm(log.vel[i, t]))
+    # an invalid log step keeps the agent's last pose; it is scored with the log's validity
+    rows = [(slot, i) for slot, i in enumerate(idx, start=1) if log.valid[i, t]]
+    if not rows:
+        return
+    slots, objs = np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+    speed = [float(np.linalg.norm(log.vel[i, t])) for i in objs]
+    env.set_poses(slots, log.xy[objs, t], log.heading[objs, t].astype(np.float64), speed)
 
 
 def _log_boxes(log: LoggedScenario, idx: np.ndarray) -> np.ndarray:
