@@ -22,7 +22,9 @@ Fields are only ever appended (selfplaydrive_abi.h "Compatibility").
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -351,5 +353,6 @@ def struct_layout() -> tuple[list[tuple[str, int, np.dtype | None]], int]:
     """What `World` fills `sd_sim` from: (name, byte offset, buffer dtype, or None for a
     dimension) per field, and the struct's size in bytes (checked against `sizeof(sd_sim)`)."""
     dt = struct_dtype()
-    rows = [(f.name, int(dt.fields[f.name][1]), None if f.is_dim else f.dtype) for f in struct_fields()]
+    fields: Mapping[str, tuple[Any, ...]] = dt.fields or {}
+    rows = [(f.name, int(fields[f.name][1]), None if f.is_dim else f.dtype) for f in struct_fields()]
     return rows, int(dt.itemsize)
