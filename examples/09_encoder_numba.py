@@ -12,7 +12,8 @@ block); the Deep Sets model builds from it (an empty block pools to zeros).
 Selection by one Hydra override: the script registers the encoder as the `obs` option
 `ego_objects` (Hydra's ConfigStore) and composes `obs=ego_objects` (keys `obs.max_objects`,
 `obs.radius`), checks it with `selfplaydrive.testing.check_encoder` and trains the Deep Sets
-model for a couple of PPO updates.
+model for a couple of PPO updates. From the command line, without registering anything:
+`selfplaydrive train obs=custom obs.target=examples/09_encoder_numba.py:ego_objects_encoder`.
 
 Run: python examples/09_encoder_numba.py [--tiny]   (pip install 'selfplaydrive[numba]')
 """

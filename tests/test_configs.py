@@ -62,8 +62,11 @@ def test_every_group_has_options(group):
     [f"{g}={o}" for g in ENV_GROUPS for o in valid_options(g)],
 )
 def test_every_env_option_builds_and_steps(override):
-    # physics=custom names a model defined elsewhere (physics.model.target, mandatory)
-    extra = {"physics=custom": ["physics.model.target=selfplaydrive.physics:JerkBicycleModel"]}
+    # physics=custom / obs=custom name a component defined elsewhere (the target is mandatory)
+    extra = {
+        "physics=custom": ["physics.model.target=selfplaydrive.physics:JerkBicycleModel"],
+        "obs=custom": ["obs.target=selfplaydrive.obs:PartialObsEncoder"],
+    }
     cfg = compose("sim", [override, "env.num_worlds=1", *extra.get(override, [])])
     env = build_env(cfg)
     obs = env.reset(seed=1)

@@ -194,6 +194,21 @@ def test_09_encoder_numba_selects_checks_and_trains(tmp_path):
     assert "'updates': 2" in out
 
 
+def test_09_is_selected_by_one_hydra_override():
+    """`obs=custom obs.target=<file>:<factory>` from the command line, keys passed to the factory."""
+    pytest.importorskip("numba")
+    from selfplaydrive.builder import build_env, compose
+
+    target = f"{EXAMPLES / '09_encoder_numba.py'}:ego_objects_encoder"
+    cfg = compose("sim", ["obs=custom", f"obs.target={target}", "+obs.max_objects=4", "env.num_worlds=1"])
+    env = build_env(cfg)
+    assert env.encoder.name == "ego_objects" and env.layout.max_objects == 4 and env.layout.max_road == 0
+    assert env.observation_space.shape == (19 + 4 * 9,)
+    env.reset(seed=0)
+    env.step(np.zeros((env.num_agents, 2), np.int64))
+    assert np.all(np.isfinite(env.observations))
+
+
 # --- 10: a physics model as a numba cfunc ----------------------------------------------------
 def test_10_physics_numba_runs_and_passes_the_checker(tmp_path):
     pytest.importorskip("numba")

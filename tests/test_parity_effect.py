@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 from contextlib import contextmanager
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -44,6 +45,7 @@ CONTEXTS = {
     ("reward", "eval"): [],
     ("obs", "paper"): [],
     ("obs", "partial"): [],
+    ("obs", "custom"): ["obs.target=selfplaydrive.obs:PaperEncoder"],
     ("env", "default"): [],
     ("env/actions", "discrete"): [],
     ("env/actions", "continuous"): [],
@@ -148,6 +150,8 @@ SPECIAL = {
     "reward.align_low_prob": [0.0, 1.0],
     "env.terminated_vehicle": ["remove", "obstacle"],
     "physics.model.target": ["selfplaydrive.physics:BicycleModel"],
+    # a Python encoder defined in a file (a test module's): the swap the option is for
+    "obs.target": [f"{Path(__file__).parent / 'obs' / 'test_obs_encoders.py'}:SpeedOnly"],
     "env.params.pedestrian_end": ["stand", "vanish"],
     "env.params.terminate_threshold": [0.05, 1.0],
 }

@@ -16,6 +16,7 @@ from selfplaydrive.obs.encoders import (
     as_encoder,
 )
 from selfplaydrive.obs.layout import EGO_FEATURES, OBJECT_FEATURES, ROAD_FEATURES, ObsLayout
+from selfplaydrive.obs.loading import load_encoder
 
 __all__ = [
     "EGO_FEATURES",
@@ -30,4 +31,5 @@ __all__ = [
     "PartialObsEncoder",
     "PythonEncoder",
     "as_encoder",
+    "load_encoder",
 ]

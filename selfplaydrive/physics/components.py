@@ -23,18 +23,15 @@ spawn). `selfplaydrive.testing.check_physics` checks a model against the contrac
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import math
-import sys
 from collections.abc import Sequence
-from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from selfplaydrive._abi_load import capsule_address, capsule_name, cython_capsule, numba_address
+from selfplaydrive._targets import load_attr
 from selfplaydrive.errors import ConfigError
 
 if TYPE_CHECKING:  # sim/ imports this package (sim/vec_env.py): the action classes at use
@@ -290,14 +287,8 @@ def load_physics(target: str, **kwargs: Any) -> Any:
         ConfigError: A malformed target, a module or attribute that does not exist, or an
             object that is not a physics model.
     """
-    if not isinstance(target, str) or ":" not in target:
-        raise ConfigError(f"physics.model.target: expected 'module:attr' or 'file.py:attr', got {target!r}")
-    where, attr = target.rsplit(":", 1)
-    module = _import(where, target)
-    if not hasattr(module, attr):
-        public = sorted(n for n in vars(module) if not n.startswith("_"))
-        raise ConfigError(f"physics.model.target {target!r}: {where!r} has no {attr!r}; it has {public}")
-    obj = getattr(module, attr)
+    obj = load_attr(target, "physics.model.target", "physics")
+    attr = str(target).rsplit(":", 1)[1]
     model = obj(**kwargs) if callable(obj) and not _is_model(obj) else obj
     if kwargs and model is obj:
         raise ConfigError(
@@ -314,33 +305,6 @@ def load_physics(target: str, **kwargs: Any) -> Any:
 
 def _is_model(obj: object) -> bool:
     return not isinstance(obj, type) and hasattr(obj, "physics_slot") and hasattr(obj, "kernel_params")
-
-
-def _import(where: str, target: str) -> ModuleType:
-    if where.endswith(".py"):
-        path = Path(where).expanduser().resolve()
-        if not path.is_file():
-            raise ConfigError(f"physics.model.target {target!r}: no file {str(path)!r}")
-        name = f"_selfplaydrive_physics_{path.stem}_{abs(hash(str(path)))}"
-        if name in sys.modules:
-            return sys.modules[name]
-        spec = importlib.util.spec_from_file_location(name, path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        sys.path.insert(0, str(path.parent))  # the file's own imports of its neighbours
-        try:
-            sys.modules[name] = module
-            spec.loader.exec_module(module)
-        except Exception:
-            sys.modules.pop(name, None)
-            raise
-        finally:
-            sys.path.remove(str(path.parent))
-        return module
-    try:
-        return importlib.import_module(where)
-    except ImportError as exc:
-        raise ConfigError(f"physics.model.target {target!r}: cannot import {where!r}: {exc}") from exc
 
 
 __all__ = [
