@@ -151,3 +151,11 @@ def test_struct_layout_offsets_by_hand():
     assert at["x"][0] == 48 and at["y"][0] == 56 and at["x"][1] == np.float32
     assert at["act_dim"][0] == at["cand_d"][0] + 8 and at["phys_dim"][0] == at["act_dim"][0] + 4
     assert size == at["phys_state"][0] + 8
+
+
+def test_struct_size_is_the_compiled_one():
+    """sizeof(sd_sim) as the compiler laid it out equals the schema's layout (World checks the
+    same at construction)."""
+    from selfplaydrive._sim.reward import abi_sizes
+
+    assert schema.struct_layout()[1] == abi_sizes()["sim"]
