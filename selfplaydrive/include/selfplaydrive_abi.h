@@ -12,6 +12,10 @@
  * light arrays likewise by w * S + k, w * P + k and w * G + g. Units: [m], [m/s], [m/s^2], [rad],
  * [s]; world frame unless stated.
  *
+ * Schema: the fields of sd_sim are the rows of the table in selfplaydrive/sim/schema.py (name,
+ * C type, shape, unit, owner), which allocates the buffers and fills this struct; a test
+ * compares the two field by field. A new field is a row there and a line here and in the .pxd.
+ *
  * Compatibility: SELFPLAYDRIVE_ABI_VERSION changes whenever a field is removed, reordered or
  * retyped (fields are only ever appended otherwise); `selfplaydrive.components.ABI_VERSION`
  * gives the version a library build expects.
