@@ -30,7 +30,8 @@ __all__ = ["NUM_STATS", "NUM_TERMS", "Dims", "allocate", "buffer_bytes", "check_
 
 @dataclass(frozen=True)
 class Dims:
-    """Slot counts of an env (read from the first Scenario's array shapes)."""
+    """Slot counts of an env (read from the first Scenario's array shapes): the dimension rows
+    of the schema (`int` fields of `sd_sim`, sim/schema.py), in the same order."""
 
     W: int
     A: int
