@@ -7,6 +7,7 @@ slots, P pedestrian slots, K waypoints, T path points, G signal groups, N = W * 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,12 +104,12 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
     """Raise ValueError when `sc` does not fit the env's slots: the shape, dtype kind and values
     of every field of `SCENARIO_FIELDS` (sim/schema.py), the map index, the signal groups and
     the episode length."""
-    sizes = sizes_of(d)
+    expect = _scenario_shapes(d)
     for f in SCENARIO_FIELDS:
-        _check_field(sc, f, sizes)
+        _check_field(sc, f, expect[f.name])
     for f in SCENARIO_FIELDS:
         if f.check == "count":
-            _check_count(sc, f, sizes[f.bound])
+            _check_count(sc, f, expect[f.bound][0])
     _check_values(sc)
     if not 0 <= sc.map_index < num_maps:
         raise ValueError(f"scenario.map_index: expected an index in [0, {num_maps}), got {sc.map_index}")
@@ -126,14 +127,26 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
         )
 
 
-def _check_field(sc: Scenario, f: ScenarioField, sizes: dict[str, int]) -> None:
+@functools.lru_cache(maxsize=64)
+def _scenario_shapes(d: Dims) -> dict[str, tuple[int, ...] | None]:
+    """Each `SCENARIO_FIELDS` row's shape in elements for the env's slot counts (and, under a
+    "count" row's capacity dim name, that capacity as a 1-tuple); cached per `Dims`."""
+    sizes = sizes_of(d)
+    out: dict[str, tuple[int, ...] | None] = {
+        f.name: None if f.shape is None else resolve(f.shape, sizes) for f in SCENARIO_FIELDS
+    }
+    out.update({f.bound: (sizes[f.bound],) for f in SCENARIO_FIELDS if f.check == "count"})
+    return out
+
+
+def _check_field(sc: Scenario, f: ScenarioField, shape: tuple[int, ...] | None) -> None:
     """Shape (in the env's slot counts) and dtype kind of one field."""
     a = getattr(sc, f.name)
-    if f.shape is not None:
-        shape, got = resolve(f.shape, sizes), np.shape(a)
+    if shape is not None:
+        got = np.shape(a)
         if got != shape:
             raise ValueError(f"scenario.{f.name}: expected shape {shape} (the env's slot counts), got {got}")
-    kind = np.asarray(a).dtype
+    kind = a.dtype if isinstance(a, np.ndarray) else np.asarray(a).dtype
     if kind.kind not in KINDS[f.kind]:
         raise ValueError(
             f"scenario.{f.name}: expected a {f.kind} array (dtype kind in {KINDS[f.kind]!r}), "
