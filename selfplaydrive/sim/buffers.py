@@ -149,7 +149,7 @@ def _check_field(sc: Scenario, f: ScenarioField, shape: tuple[int, ...] | None) 
     kind = a.dtype if isinstance(a, np.ndarray) else np.asarray(a).dtype
     if kind.kind not in KINDS[f.kind]:
         raise ValueError(
-            f"scenario.{f.name}: expected a {f.kind} array (dtype kind in {KINDS[f.kind]!r}), "
+            f"scenario.{f.name}: expected {f.kind} values (dtype kind in {KINDS[f.kind]!r}), "
             f"got dtype {kind}"
         )
 

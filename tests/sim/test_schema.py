@@ -159,3 +159,52 @@ def test_struct_size_is_the_compiled_one():
     from selfplaydrive._sim.reward import abi_sizes
 
     assert schema.struct_layout()[1] == abi_sizes()["sim"]
+
+
+def _small_scenario():
+    from helpers import make_scenario
+
+    return make_scenario([{"xy": (0.0, 0.0), "waypoints": [(5.0, 0.0)]}], A=2, S=1, P=1, K=3, T=3)
+
+
+def _small_dims() -> Dims:
+    return Dims(W=1, A=2, S=1, P=1, K=3, T=3, G=2, max_obj=4, max_road=4, cand_cap=64, obs_dim=8)
+
+
+def test_check_scenario_derives_shape_dtype_and_value_checks_from_the_table():
+    from selfplaydrive.sim.buffers import check_scenario
+
+    check_scenario(_small_scenario(), _small_dims(), 1)  # fits
+    cases = [
+        (
+            "num_waypoints",
+            np.array([1.0, 0.0]),
+            r"num_waypoints: expected int values .* got dtype float64",
+        ),
+        ("agent_valid", np.array(["a", "b"]), r"scenario\.agent_valid: expected bool values"),
+        ("hidden", np.ones((2, 2), np.float32), r"scenario\.hidden: expected shape \(2, 3\)"),
+        ("ped_path", np.zeros((1, 4, 2), np.float32), r"scenario\.ped_path: expected shape \(1, 3, 2\)"),
+        ("light_time_left", np.ones(1, np.float32), r"scenario\.light_time_left: expected shape \(0,\)"),
+        (
+            "agent_speed",
+            np.array([np.nan, 0.0], np.float32),
+            r"agent_speed: expected finite values .* slot 0",
+        ),
+    ]
+    for name, value, match in cases:
+        sc = _small_scenario()
+        setattr(sc, name, value)
+        with pytest.raises(ValueError, match=match):
+            check_scenario(sc, _small_dims(), 1)
+
+
+def test_every_scenario_row_names_a_scenario_field():
+    from selfplaydrive.scenario.types import Scenario
+
+    names = {f.name for f in dataclasses.fields(Scenario)}
+    for f in schema.SCENARIO_FIELDS:
+        assert f.name in names, f.name
+        assert f.kind in schema.KINDS and f.check in ("", "finite", "size", "count", "points"), f.name
+        assert not f.valid or f.valid in names, f.name
+        if f.check == "points":
+            assert f.bound in names, f.name
