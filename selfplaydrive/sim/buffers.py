@@ -104,12 +104,12 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
     """Raise ValueError when `sc` does not fit the env's slots: the shape, dtype kind and values
     of every field of `SCENARIO_FIELDS` (sim/schema.py), the map index, the signal groups and
     the episode length."""
-    expect = _scenario_shapes(d)
+    shapes, caps = _scenario_shapes(d)
     for f in SCENARIO_FIELDS:
-        _check_field(sc, f, expect[f.name])
+        _check_field(sc, f, shapes[f.name])
     for f in SCENARIO_FIELDS:
         if f.check == "count":
-            _check_count(sc, f, expect[f.bound][0])
+            _check_count(sc, f, caps[f.bound])
     _check_values(sc)
     if not 0 <= sc.map_index < num_maps:
         raise ValueError(f"scenario.map_index: expected an index in [0, {num_maps}), got {sc.map_index}")
@@ -128,15 +128,13 @@ def check_scenario(sc: Scenario, d: Dims, num_maps: int) -> None:
 
 
 @functools.lru_cache(maxsize=64)
-def _scenario_shapes(d: Dims) -> dict[str, tuple[int, ...] | None]:
-    """Each `SCENARIO_FIELDS` row's shape in elements for the env's slot counts (and, under a
-    "count" row's capacity dim name, that capacity as a 1-tuple); cached per `Dims`."""
+def _scenario_shapes(d: Dims) -> tuple[dict[str, tuple[int, ...] | None], dict[str, int]]:
+    """Each `SCENARIO_FIELDS` row's shape in elements for the env's slot counts, and the
+    capacity of each "count" row's bound dim; cached per `Dims`."""
     sizes = sizes_of(d)
-    out: dict[str, tuple[int, ...] | None] = {
-        f.name: None if f.shape is None else resolve(f.shape, sizes) for f in SCENARIO_FIELDS
-    }
-    out.update({f.bound: (sizes[f.bound],) for f in SCENARIO_FIELDS if f.check == "count"})
-    return out
+    shapes = {f.name: None if f.shape is None else resolve(f.shape, sizes) for f in SCENARIO_FIELDS}
+    caps = {f.bound: sizes[f.bound] for f in SCENARIO_FIELDS if f.check == "count"}
+    return shapes, caps
 
 
 def _check_field(sc: Scenario, f: ScenarioField, shape: tuple[int, ...] | None) -> None:
@@ -149,8 +147,7 @@ def _check_field(sc: Scenario, f: ScenarioField, shape: tuple[int, ...] | None) 
     kind = a.dtype if isinstance(a, np.ndarray) else np.asarray(a).dtype
     if kind.kind not in KINDS[f.kind]:
         raise ValueError(
-            f"scenario.{f.name}: expected {f.kind} values (dtype kind in {KINDS[f.kind]!r}), "
-            f"got dtype {kind}"
+            f"scenario.{f.name}: expected {f.kind} values (dtype kind in {KINDS[f.kind]!r}), got dtype {kind}"
         )
 
 
