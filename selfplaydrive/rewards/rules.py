@@ -47,6 +47,7 @@ class RuleTerm:
         tables: RoadMap -> (records (n, R), boxes (n, 4)) of one map.
         state_dim: Per-agent state columns the kernel owns.
         doc: One line for listings.
+        kernel: Name of the kernel in _sim/rules.pyx (default: `name`; a renamed copy keeps it).
     """
 
     name: str
@@ -55,6 +56,7 @@ class RuleTerm:
     tables: Callable[[RoadMap], tuple[np.ndarray, np.ndarray]]
     state_dim: int = 0
     doc: str = ""
+    kernel: str = ""
 
     def with_args(self, *args: float) -> RuleTerm:
         """This term with other parameter values (``{weight: W, args: [...]}`` in a reward).
@@ -81,7 +83,7 @@ class RuleTerm:
 
         bodies = [grid_body(*self.tables(m)) for m in maps]
         args = pack(self.name, self.params, bodies)
-        address = int(rules.rule_term_addresses()[self.name])
+        address = int(rules.rule_term_addresses()[self.kernel or self.name])
         return KernelTerm(self.name, address, args, "builtin", self.doc, rules, self.state_dim)
 
 
