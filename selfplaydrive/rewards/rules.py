@@ -20,6 +20,7 @@ the formulas; selfplaydrive/testing/rule_terms.py the NumPy references.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -29,7 +30,13 @@ import numpy as np
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.elements import LaneKind, StopKind
 from selfplaydrive.maps.roadmap import RoadMap
-from selfplaydrive.maps.rule_geometry import GATE_DEPTH, GATE_LEFT, GATE_RIGHT, controlled_area, controlled_zones
+from selfplaydrive.maps.rule_geometry import (
+    GATE_DEPTH,
+    GATE_LEFT,
+    GATE_RIGHT,
+    controlled_area,
+    controlled_zones,
+)
 from selfplaydrive.rewards.components import KernelTerm
 from selfplaydrive.rewards.rule_tables import grid_body, pack
 
@@ -108,7 +115,7 @@ def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
         pts = road_map.stop_lines[k].astype(np.float64)
         for lane in index[offsets[k] : offsets[k + 1]]:
             u = _lane_direction(road_map, int(lane), pts)
-            for a, b in zip(pts[:-1], pts[1:], strict=True):
+            for a, b in itertools.pairwise(pts):
                 e = b - a
                 n = np.array([e[1], -e[0]]) / max(float(np.hypot(*e)), 1e-9)
                 n = n if float(n @ u) >= 0.0 else -n

@@ -169,7 +169,9 @@ def _orient(a: Any, b: Any, c: Any) -> F:
 def _crosses_outline(v: np.ndarray, p: Any, q: Any) -> bool:
     for k in range(len(v)):
         a, b = v[k], v[(k + 1) % len(v)]
-        if (_orient(p, q, a) > 0) != (_orient(p, q, b) > 0) and (_orient(a, b, p) > 0) != (_orient(a, b, q) > 0):
+        if (_orient(p, q, a) > 0) != (_orient(p, q, b) > 0) and (_orient(a, b, p) > 0) != (
+            _orient(a, b, q) > 0
+        ):
             return True
     return False
 
@@ -182,7 +184,11 @@ def _near(v: np.ndarray, st: Any, j: int, ahead: F, margin: F) -> bool:
         if _in_polygon(v, x, y):
             return True
         e = np.roll(v, -1, axis=0) - v
-        t = np.clip(((x - v[:, 0]) * e[:, 0] + (y - v[:, 1]) * e[:, 1]) / (e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]), 0, 1)
+        t = np.clip(
+            ((x - v[:, 0]) * e[:, 0] + (y - v[:, 1]) * e[:, 1]) / (e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]),
+            0,
+            1,
+        )
         dx, dy = x - (v[:, 0] + t * e[:, 0]), y - (v[:, 1] + t * e[:, 1])
         if (dx * dx + dy * dy).min() <= margin * margin:
             return True

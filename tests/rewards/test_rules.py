@@ -55,7 +55,9 @@ def rule_road():
             ],
             traffic_lights=[TrafficLightElement(across(100.0), 0, [0])],
             crosswalks=[
-                CrosswalkElement(np.array([[170.0, -3.5], [173.0, -3.5], [173.0, 3.5], [170.0, 3.5]]) + [X0, 0.0])
+                CrosswalkElement(
+                    np.array([[170.0, -3.5], [173.0, -3.5], [173.0, 3.5], [170.0, 3.5]]) + np.array([X0, 0.0])
+                )
             ],
         )
     )
@@ -75,13 +77,22 @@ def drive(road, cars, steps=40, light=RED, peds=(), accel=None):
     speed) on the test road, driven straight at constant speed (or `accel(step)` m/s^2)."""
     sc = blank_scenario(road, 0, np.array([0.0, 0.0]), 6.0)
     for k, (x, y, h, v) in enumerate(cars):
-        put_agent(sc, k, np.array([x + X0, y]), h, v, (4.5, 2.0), 0 if h == 0.0 else 1, np.array([[x + X0 + 30.0, y]]))
+        put_agent(
+            sc,
+            k,
+            np.array([x + X0, y]),
+            h,
+            v,
+            (4.5, 2.0),
+            0 if h == 0.0 else 1,
+            np.array([[x + X0 + 30.0, y]]),
+        )
     sc.lights_enabled = True
     sc.light_state[:] = light
     sc.light_time_left[:] = 1.0e4
     for k, (path, speed) in enumerate(peds):
         sc.ped_valid[k], sc.ped_num_points[k], sc.ped_speed[k] = True, len(path), speed
-        sc.ped_path[k, : len(path)] = path + [X0, 0.0]
+        sc.ped_path[k, : len(path)] = path + np.array([X0, 0.0])
         sc.ped_size[k] = (0.5, 0.5)
     env = VecEnv(road, FixedScenarioSpawner([sc]), 1, actions=ContinuousActions(), reward=reward(*RULES))
     env.reset(0)
@@ -217,7 +228,10 @@ def test_state_round_trip_keeps_the_term_state():
     assert env.buffers["term_state"].shape == (env.num_agents, 1) and env.buffers["term_state"].any()
     saved = env.get_state()
     rng = np.random.default_rng(9)
-    acts = [np.stack([rng.integers(0, 7, env.num_agents), rng.integers(0, 13, env.num_agents)], axis=1) for _ in range(30)]
+    acts = [
+        np.stack([rng.integers(0, 7, env.num_agents), rng.integers(0, 13, env.num_agents)], axis=1)
+        for _ in range(30)
+    ]
     for a in acts:
         env.step(a)
     after = {k: env.buffers[k].copy() for k in ("term_state", "term_sum", "terms")}
