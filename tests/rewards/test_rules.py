@@ -321,3 +321,23 @@ def test_bypass_through_the_oncoming_lane_pays_and_the_compliant_driver_does_not
     assert all(s < 0 for s in sums), sums
     outcomes, sums = _suite_sums(town, items, "comply")
     assert outcomes == ["stopped"] * len(items) and sums == [0.0] * len(items)
+
+
+def test_rule_terms_pass_the_reward_term_checker():
+    from selfplaydrive.testing import check_reward_term
+
+    town = load_map("default")
+    for name in RULES:
+        check_reward_term(get_term(name), town, steps=20)
+
+
+def test_hydra_selects_rule_terms_with_parameters():
+    from selfplaydrive.builder import build_env, compose
+
+    over = ["+reward.terms.red_intersection=2.0", "+reward.terms.stop_sign={weight:1.0,args:[0.3,6.0]}"]
+    env = build_env(compose("sim", over), maps=[rule_road()], num_worlds=1)
+    assert env.term_names[-2:] == ("red_intersection", "stop_sign")
+    assert env.reward.columns[-2].weight == 2.0 and tuple(env.reward.columns[-1].term.args[3:5]) == (
+        np.float32(0.3),
+        6.0,
+    )
