@@ -18,7 +18,8 @@ lane segment)::
     CSR (nx * ny + 1 entries), the items (record indices) and the records (n * R floats)
 
 Cell c lists the records whose bounding box, grown by `REACH`, meets it, so the records a
-move of at most `REACH` m ending in cell c can meet are all listed there. Integers are stored
+move of at most `REACH` m ending in cell c can meet are all listed there (`wrong_way`, which
+tests only the current position, grows them by nothing and uses 5 m cells). Integers are stored
 as float32, exact below 2**24; `pack` raises when a table is larger.
 """
 
@@ -38,13 +39,16 @@ CELL = 10.0  # [m] grid cell edge
 MAX_CELLS = 1 << 20  # cells per map; the cell grows on larger maps
 
 
-def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL) -> np.ndarray:
+def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach: float = REACH) -> np.ndarray:
     """One map's body: the records and the grid listing them.
 
     Args:
         records: (n, R) float records.
         boxes: (n, 4) bounding boxes xmin, ymin, xmax, ymax [m] of the records.
         cell: Grid cell edge [m] (grown until the grid has at most `MAX_CELLS` cells).
+        reach: [m] the boxes are grown by this before listing: the longest move whose end
+            cell must list every record the move can meet (0 for a term that tests only the
+            current position).
 
     Returns:
         (size,) float64 body (`pack` converts and checks it).
@@ -53,8 +57,8 @@ def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL) -> np.
     n, width = records.shape
     if n == 0:
         return np.array([0.0, 0.0, cell, 1, 1, max(width, 1), 9, 11, 11, 0.0, 0.0])
-    lo = np.asarray(boxes, np.float64)[:, :2] - REACH
-    hi = np.asarray(boxes, np.float64)[:, 2:] + REACH
+    lo = np.asarray(boxes, np.float64)[:, :2] - reach
+    hi = np.asarray(boxes, np.float64)[:, 2:] + reach
     origin = lo.min(axis=0)
     span = hi.max(axis=0) - origin
     while np.prod(np.floor(span / cell) + 1) > MAX_CELLS:

@@ -38,7 +38,7 @@ from selfplaydrive.maps.rule_geometry import (
     controlled_zones,
 )
 from selfplaydrive.rewards.components import KernelTerm
-from selfplaydrive.rewards.rule_tables import grid_body, pack
+from selfplaydrive.rewards.rule_tables import CELL, REACH, grid_body, pack
 
 __all__ = ["RULE_TERMS", "RuleTerm", "crosswalk_records", "lane_records", "stop_records", "zone_records"]
 
@@ -55,6 +55,7 @@ class RuleTerm:
         state_dim: Per-agent state columns the kernel owns.
         doc: One line for listings.
         kernel: Name of the kernel in _sim/rules.pyx (default: `name`; a renamed copy keeps it).
+        grid: (cell edge, reach) [m] of the per-map grids (rule_tables.py `grid_body`).
     """
 
     name: str
@@ -64,6 +65,7 @@ class RuleTerm:
     state_dim: int = 0
     doc: str = ""
     kernel: str = ""
+    grid: tuple[float, float] = (CELL, REACH)
 
     def with_args(self, *args: float) -> RuleTerm:
         """This term with other parameter values (``{weight: W, args: [...]}`` in a reward).
@@ -88,7 +90,7 @@ class RuleTerm:
         """The kernel term whose args pack `maps`' tables (world w reads ``maps[map_id[w]]``)."""
         from selfplaydrive._sim import rules
 
-        bodies = [grid_body(*self.tables(m)) for m in maps]
+        bodies = [grid_body(*self.tables(m), *self.grid) for m in maps]
         args = pack(self.name, self.params, bodies)
         address = int(rules.rule_term_addresses()[self.kernel or self.name])
         return KernelTerm(self.name, address, args, "builtin", self.doc, rules, self.state_dim)
@@ -203,5 +205,6 @@ RULE_TERMS = (
         ("v_min [m/s]",),
         lane_records,
         doc="R = -dt (-1 per second) driving against the lane the centre lies on",
+        grid=(5.0, 0.0),  # tests the current position only: no reach, finer cells
     ),
 )
