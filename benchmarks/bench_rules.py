@@ -32,8 +32,10 @@ from selfplaydrive.sim.vec_env import VecEnv
 RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way")
 
 
-def make(road_map, rules: bool, worlds: int, threads: int, profile: bool) -> VecEnv:
-    weights = {n: 1.0 for n in TERM_NAMES} | ({n: 1.0 for n in RULES} if rules else {})
+def make(road_map, rules: bool | str, worlds: int, threads: int, profile: bool) -> VecEnv:
+    """The paper's terms, plus all four rule terms (True) or one of them (its name)."""
+    extra = RULES if rules is True else (rules,) if rules else ()
+    weights = {n: 1.0 for n in TERM_NAMES} | {n: 1.0 for n in extra}
     env = VecEnv(
         road_map,
         PaperSpawner(),
@@ -67,8 +69,12 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--each", action="store_true", help="reward stage of each rule term alone")
     args = ap.parse_args()
     town = load_map("default")
+    if args.each:
+        each(town, args)
+        return
     envs = {
         (rules, prof): make(town, rules, args.worlds, args.threads, prof)
         for rules in (False, True)
@@ -108,6 +114,26 @@ def main() -> None:
         print(f"  {k:14s} {v:8.3f}")
     print(f"  whole step with the rule terms / paper: {out['step_ratio']:.3f}")
     print(f"  reward stage: +{out['rules_reward_extra_us']:.3f} us per agent-step for the four rule terms")
+
+
+def each(town, args: argparse.Namespace) -> None:
+    """Reward stage per agent-step of the paper's terms plus one rule term, for each (rotated
+    order per round), and the extra cost over the paper's terms alone."""
+    variants: list[bool | str] = [False, *RULES]
+    envs = {v: make(town, v, args.worlds, args.threads, True) for v in variants}
+    rng = np.random.default_rng(0)
+    n = envs[False].num_agents
+    res: dict[bool | str, list[float]] = {v: [] for v in variants}
+    for r in range(args.rounds):
+        acts = [np.stack([rng.integers(0, 7, n), rng.integers(0, 13, n)], axis=1) for _ in range(args.steps)]
+        for v in variants[r % len(variants) :] + variants[: r % len(variants)]:
+            res[v].append(run(envs[v], acts)[1])
+    base = statistics.median(res[False])
+    print(f"reward stage [us per agent-step], {args.worlds} worlds, medians of {args.rounds} rounds:")
+    print(f"  paper terms        {base:.4f}")
+    for v in RULES:
+        m = statistics.median(res[v])
+        print(f"  + {v:16s} {m:.4f}  (+{m - base:.4f})")
 
 
 if __name__ == "__main__":

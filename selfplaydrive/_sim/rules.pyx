@@ -13,20 +13,23 @@ the map instead; tests/rewards/test_rules.py compares both on random rollouts.
 """
 
 from libc.math cimport sqrtf, fabsf
+
+cdef double HALF_PI = 1.5707963267948966
 from libc.stdint cimport int32_t, int64_t, uintptr_t
 from selfplaydrive._sim.common cimport Sim, Params, Atlas, LIGHT_RED
 
 cdef enum:
     H_MAPS = 2        # args[2]: number of maps (args[0]: state offset, args[1]: layout version)
     H_PARAMS = 3      # the term's parameters start here; then the per-map body offsets
-    B_ORIGIN = 0      # body: grid origin x, y [m], cell edge [m], nx, ny, record width,
-    B_CELL = 2        # then the offsets (from the body start) of the cell CSR, the items
-    B_NX = 3          # and the records
+    B_ORIGIN = 0      # body: grid origin x, y [m], 1 / cell edge [1/m], nx, ny, record width,
+    B_INV_CELL = 2    # then the offsets (from the body start) of the cell CSR, the items
+    B_NX = 3          # and the records, then a number of the map the term defines
     B_NY = 4
     B_WIDTH = 5
     B_CELLS = 6
     B_ITEMS = 7
     B_RECS = 8
+    B_SCALAR = 9
 
 
 def rule_term_addresses():
@@ -44,11 +47,13 @@ ctypedef struct Cell:
     const float* items    # record indices listed in the cell
     int n                 # how many
     int width             # floats per record
+    float scalar          # the map's number (rule_tables.py)
 
 
 cdef inline bint map_cell(const float* args, int nparams, int m, float x, float y,
                           Cell* c) noexcept nogil:
-    """The grid cell of map `m` holding (x, y); False (and c.n = 0) outside the grid."""
+    """The grid cell of map `m` holding (x, y); False (and c.n = 0) outside the grid or in an
+    empty cell (c.scalar is set whenever m is a valid map)."""
     cdef const float* body
     cdef float fx, fy
     cdef int nx, ny, k
@@ -57,8 +62,9 @@ cdef inline bint map_cell(const float* args, int nparams, int m, float x, float 
     if m < 0 or m >= <int>args[H_MAPS]:
         return False
     body = args + <int64_t>args[H_PARAMS + nparams + m]
-    fx = (x - body[B_ORIGIN]) / body[B_CELL]
-    fy = (y - body[B_ORIGIN + 1]) / body[B_CELL]
+    c.scalar = body[B_SCALAR]
+    fx = (x - body[B_ORIGIN]) * body[B_INV_CELL]
+    fy = (y - body[B_ORIGIN + 1]) * body[B_INV_CELL]
     nx = <int>body[B_NX]
     ny = <int>body[B_NY]
     if not (fx >= 0.0 and fy >= 0.0 and fx < nx and fy < ny):  # NaN fails too
@@ -323,7 +329,10 @@ cdef void term_wrong_way(const Sim* sim, const Params* prm, const Atlas* atlas, 
                          int32_t w, float* out, int32_t stride) noexcept nogil:
     """-dt (i.e. -1 per second) per step while the agent drives faster than v_min with its
     centre within half a lane width of a centerline segment heading more than 90 degrees from
-    its own heading and of none heading within 90 degrees of it; else 0. Params: v_min [m/s]."""
+    its own heading and of none heading within 90 degrees of it; else 0. Params: v_min [m/s].
+    Shortcut: a car whose lane association (events stage) puts it within the map's narrowest
+    half lane width of a centerline heading within 90 degrees of it is on a lane going its
+    way (most cars, most steps), and the segment scan is skipped."""
     cdef int a, i, j, A = sim.A
     cdef float vmin = args[H_PARAMS], x, y, dx, dy, t
     cdef const float* s
@@ -338,6 +347,9 @@ cdef void term_wrong_way(const Sim* sim, const Params* prm, const Atlas* atlas, 
             continue
         x, y = sim.x[i], sim.y[i]
         if not map_cell(args, 1, sim.map_id[w], x, y, &c):
+            continue
+        if (sim.lane_valid[i] and fabsf(sim.lane_alpha[i]) < HALF_PI
+                and fabsf(sim.lane_s[i]) <= c.scalar):
             continue
         against = False
         along = False

@@ -13,9 +13,10 @@ Layout of the args::
 A map body is a uniform grid over records of fixed width (a zone, a line segment, a polygon, a
 lane segment)::
 
-    [0, 1] grid origin x, y [m]; [2] cell edge [m]; [3, 4] cells nx, ny (x-major: cell
+    [0, 1] grid origin x, y [m]; [2] 1 / cell edge [1/m]; [3, 4] cells nx, ny (x-major: cell
     ix * ny + iy); [5] record width R; [6, 7, 8] offsets from the body start of the cell
-    CSR (nx * ny + 1 entries), the items (record indices) and the records (n * R floats)
+    CSR (nx * ny + 1 entries), the items (record indices) and the records (n * R floats);
+    [9] one number of the map the term defines (wrong_way: its narrowest half lane width)
 
 Cell c lists the records whose bounding box, grown by `REACH`, meets it, so the records a
 move of at most `REACH` m ending in cell c can meet are all listed there (`wrong_way`, which
@@ -39,7 +40,9 @@ CELL = 10.0  # [m] grid cell edge
 MAX_CELLS = 1 << 20  # cells per map; the cell grows on larger maps
 
 
-def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach: float = REACH) -> np.ndarray:
+def grid_body(
+    records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach: float = REACH, scalar: float = 0.0
+) -> np.ndarray:
     """One map's body: the records and the grid listing them.
 
     Args:
@@ -49,6 +52,7 @@ def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach:
         reach: [m] the boxes are grown by this before listing: the longest move whose end
             cell must list every record the move can meet (0 for a term that tests only the
             current position).
+        scalar: The map's number at [9].
 
     Returns:
         (size,) float64 body (`pack` converts and checks it).
@@ -56,7 +60,7 @@ def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach:
     records = np.asarray(records, np.float64)
     n, width = records.shape
     if n == 0:
-        return np.array([0.0, 0.0, cell, 1, 1, max(width, 1), 9, 11, 11, 0.0, 0.0])
+        return np.array([0.0, 0.0, 1.0 / cell, 1, 1, max(width, 1), 10, 12, 12, scalar, 0.0, 0.0])
     lo = np.asarray(boxes, np.float64)[:, :2] - reach
     hi = np.asarray(boxes, np.float64)[:, 2:] + reach
     origin = lo.min(axis=0)
@@ -70,19 +74,21 @@ def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL, reach:
     order = np.argsort(cells, kind="stable")
     offsets = np.zeros(nx * ny + 1, np.int64)
     np.cumsum(np.bincount(cells, minlength=nx * ny), out=offsets[1:])
-    head = 9
+    head = 10
+    n_off = len(offsets)
     return np.concatenate(
         [
             [
                 origin[0],
                 origin[1],
-                cell,
+                1.0 / cell,
                 nx,
                 ny,
                 width,
                 head,
-                head + len(offsets),
-                head + len(offsets) + len(items),
+                head + n_off,
+                head + n_off + len(items),
+                scalar,
             ],
             offsets,
             items[order],

@@ -51,7 +51,7 @@ class RuleTerm:
         name: Column name.
         params: Parameter values, in the order of `param_names`.
         param_names: What each parameter is (with its unit).
-        tables: RoadMap -> (records (n, R), boxes (n, 4)) of one map.
+        tables: RoadMap -> (records (n, R), boxes (n, 4), the map's number) of one map.
         state_dim: Per-agent state columns the kernel owns.
         doc: One line for listings.
         kernel: Name of the kernel in _sim/rules.pyx (default: `name`; a renamed copy keeps it).
@@ -61,7 +61,7 @@ class RuleTerm:
     name: str
     params: tuple[float, ...]
     param_names: tuple[str, ...]
-    tables: Callable[[RoadMap], tuple[np.ndarray, np.ndarray]]
+    tables: Callable[[RoadMap], tuple[np.ndarray, np.ndarray, float]]
     state_dim: int = 0
     doc: str = ""
     kernel: str = ""
@@ -90,22 +90,25 @@ class RuleTerm:
         """The kernel term whose args pack `maps`' tables (world w reads ``maps[map_id[w]]``)."""
         from selfplaydrive._sim import rules
 
-        bodies = [grid_body(*self.tables(m), *self.grid) for m in maps]
+        bodies = []
+        for m in maps:
+            records, boxes, scalar = self.tables(m)
+            bodies.append(grid_body(records, boxes, *self.grid, scalar=scalar))
         args = pack(self.name, self.params, bodies)
         address = int(rules.rule_term_addresses()[self.kernel or self.name])
         return KernelTerm(self.name, address, args, "builtin", self.doc, rules, self.state_dim)
 
 
 # map tables -----------------------------------------------------------------------------------
-def zone_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+def zone_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     """Controlled areas: (cx, cy, ux, uy, group) per (light line, vehicle lane), and boxes."""
     z = controlled_zones(road_map)
     rec = np.stack([z[:, 0], z[:, 1], np.cos(z[:, 2]), np.sin(z[:, 2]), z[:, 3]], axis=1)
     corners = [controlled_area(r[:2], float(r[2])) for r in z]
-    return rec, _boxes(corners)
+    return rec, _boxes(corners), 0.0
 
 
-def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     """STOP-line segments: (ax, ay, ex, ey, nx, ny) per segment of a STOP line and lane it
     applies to (e = b - a, n the unit normal pointing along the lane), and boxes. YIELD lines
     and lines that apply to no lane are left out."""
@@ -123,10 +126,10 @@ def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
                 n = n if float(n @ u) >= 0.0 else -n
                 rows.append([a[0], a[1], e[0], e[1], n[0], n[1]])
                 boxes.append([min(a[0], b[0]), min(a[1], b[1]), max(a[0], b[0]), max(a[1], b[1])])
-    return np.array(rows, np.float64).reshape(-1, 6), np.array(boxes, np.float64).reshape(-1, 4)
+    return np.array(rows, np.float64).reshape(-1, 6), np.array(boxes, np.float64).reshape(-1, 4), 0.0
 
 
-def crosswalk_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+def crosswalk_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     """Crosswalk polygons: (nv, xmin, ymin, xmax, ymax, x0, y0, ...) padded to the map's most
     vertices, and boxes."""
     polys = [road_map.crosswalks[k].astype(np.float64) for k in range(len(road_map.crosswalks))]
@@ -135,12 +138,13 @@ def crosswalk_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
     for j, p in enumerate(polys):
         rows[j, :5] = [len(p), *p.min(axis=0), *p.max(axis=0)]
         rows[j, 5 : 5 + 2 * len(p)] = p.reshape(-1)
-    return rows, rows[:, 1:5].copy()
+    return rows, rows[:, 1:5].copy(), 0.0
 
 
-def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
-    """Vehicle-lane centerline segments: (ax, ay, ux, uy, length, half width), and boxes grown
-    by the half width."""
+def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
+    """Vehicle-lane centerline segments: (ax, ay, ux, uy, length, half width), boxes grown by
+    the half width, and the narrowest half width (the kernel's shortcut: a car its lane
+    association places within it of a centerline going its way is on a lane going its way)."""
     lanes = road_map.lanes
     rows = []
     for i in range(len(lanes)):
@@ -157,7 +161,7 @@ def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
     b = rec[:, :2] + rec[:, 2:4] * rec[:, 4:5]
     lo = np.minimum(rec[:, :2], b) - rec[:, 5:6]
     hi = np.maximum(rec[:, :2], b) + rec[:, 5:6]
-    return rec, np.concatenate([lo, hi], axis=1)
+    return rec, np.concatenate([lo, hi], axis=1), float(rec[:, 5].min()) if len(rec) else 0.0
 
 
 def _lane_direction(road_map: RoadMap, lane: int, pts: np.ndarray) -> np.ndarray:
@@ -205,6 +209,6 @@ RULE_TERMS = (
         ("v_min [m/s]",),
         lane_records,
         doc="R = -dt (-1 per second) driving against the lane the centre lies on",
-        grid=(5.0, 0.0),  # tests the current position only: no reach, finer cells
+        grid=(5.0, 0.05),  # tests the current position only: finer cells, reach for rounding
     ),
 )

@@ -20,6 +20,7 @@ from selfplaydrive.rewards.rules import crosswalk_records, lane_records, stop_re
 
 F = np.float32
 RED = 1  # SD_LIGHT_RED
+HALF_PI = 1.5707963267948966
 _TABLES: dict[tuple[int, str], tuple[RoadMap, np.ndarray]] = {}
 
 
@@ -196,15 +197,20 @@ def _near(v: np.ndarray, st: Any, j: int, ahead: F, margin: F) -> bool:
 
 
 def wrong_way(st: Any, maps: Sequence[RoadMap], params: Sequence[float], dt: float) -> np.ndarray:
-    """-dt where the agent drives against every lane its centre lies on."""
+    """-dt where the agent drives against every lane its centre lies on (not when its lane
+    association puts it within the map's narrowest half lane width of a lane going its way)."""
     vmin = F(params[0])
     W, A = _agents(st)
     tables = [_table(m, "lane") for m in maps]
     out = np.zeros(W * A, F)
     for w in range(W):
         s = tables[int(st.map_id[w])]
+        narrow = s[:, 5].min() if len(s) else F(0.0)
         for i in range(w * A, (w + 1) * A):
             if not st.active[i] or st.speed[i] <= vmin:
+                continue
+            # on the associated lane going its way (the kernel's shortcut, same result)
+            if st.lane_valid[i] and abs(float(st.lane_alpha[i])) < HALF_PI and abs(st.lane_s[i]) <= narrow:
                 continue
             dx, dy = st.x[i] - s[:, 0], st.y[i] - s[:, 1]
             t = dx * s[:, 2] + dy * s[:, 3]
