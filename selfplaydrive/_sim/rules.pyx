@@ -315,6 +315,10 @@ cdef void term_crosswalk_yield(const Sim* sim, const Params* prm, const Atlas* a
         px, py, qx, qy = sim.px[i], sim.py[i], sim.x[i], sim.y[i]
         for j in range(c.n):
             poly = record(&c, j)
+            # a move whose box misses the polygon's box cannot enter it
+            if (max(px, qx) < poly[1] or min(px, qx) > poly[3] or max(py, qy) < poly[2]
+                    or min(py, qy) > poly[4]):
+                continue
             if in_polygon(poly, px, py):
                 continue
             if not (in_polygon(poly, qx, qy) or crosses_polygon(poly, px, py, qx, qy)):
