@@ -341,3 +341,18 @@ def test_hydra_selects_rule_terms_with_parameters():
         np.float32(0.3),
         6.0,
     )
+
+
+def test_the_suite_and_the_term_share_the_controlled_area():
+    """One definition (maps/rule_geometry.py): the red-light suite's controlled area of each
+    scenario is the term's zone of its (light line, lane), to the path's rounding (the suite
+    finds the line point on its joined ego path, the term on the lane's own centerline)."""
+    from selfplaydrive.eval.suites import RedLightSuite
+    from selfplaydrive.maps.rule_geometry import controlled_area, controlled_zones, line_point
+
+    town = load_map("default")
+    zones = controlled_zones(town)
+    for it in RedLightSuite().generate(town, np.random.default_rng(4), 12):
+        c, h = line_point(town, it.info["light_line"], it.info["lane"])
+        np.testing.assert_allclose(controlled_area(c, h), it.paths["area"], atol=0.01)
+        assert np.min(np.hypot(*(zones[:, :2] - c).T)) < 1e-9  # and the term packs that zone
