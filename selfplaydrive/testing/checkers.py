@@ -77,8 +77,8 @@ def check_reward_term(
 
     if not isinstance(term, (KernelTerm, RewardHook)) and not _is_map_bound(term):
         raise ComponentCheckError(
-            f"reward term {term!r}: expected a KernelTerm, a map-bound term (bind(maps)) or a "
-            "RewardHook (name and __call__(state))"
+            f"reward term {term!r}: expected a KernelTerm or a RewardHook (name and __call__(state)), "
+            "or a map-bound term (bind(maps))"
         )
     form = term.form if isinstance(term, KernelTerm) else "map-bound" if _is_map_bound(term) else "python"
     label = f"reward term {term.name!r} ({form})"
