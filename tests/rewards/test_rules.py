@@ -356,3 +356,12 @@ def test_the_suite_and_the_term_share_the_controlled_area():
         c, h = line_point(town, it.info["light_line"], it.info["lane"])
         np.testing.assert_allclose(controlled_area(c, h), it.paths["area"], atol=0.01)
         assert np.min(np.hypot(*(zones[:, :2] - c).T)) < 1e-9  # and the term packs that zone
+
+
+def test_numba_view_has_the_term_state_fields():
+    pytest.importorskip("numba")
+    from selfplaydrive._sim.reward import abi_sizes
+    from selfplaydrive.rewards.numba_abi import SIM, struct_dtype
+
+    assert SIM.phys_state < SIM.term_state_dim < SIM.term_state  # appended after phys_state
+    assert struct_dtype("sim").itemsize == abi_sizes()["sim"]
