@@ -79,6 +79,9 @@ cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, const Encod
     # physics components: a model's own per-agent state starts at 0 at spawn (abi.h)
     for k in range(w * sim.A * sim.phys_dim, (w + 1) * sim.A * sim.phys_dim):
         sim.phys_state[k] = 0.0
+    # reward terms with state (abi.h): their per-agent memory likewise starts at 0 at spawn
+    for k in range(w * sim.A * sim.term_state_dim, (w + 1) * sim.A * sim.term_state_dim):
+        sim.term_state[k] = 0.0
     encode_world(sim, atlas, prm, enc, w)
 
 
@@ -148,7 +151,8 @@ cdef class World:
         address, args = physics
         N = self.sim.W * self.sim.A
         for name, shape in (("act_i", (N, self.sim.act_dim)), ("act_f", (N, self.sim.act_dim)),
-                            ("phys_state", (N, self.sim.phys_dim))):
+                            ("phys_state", (N, self.sim.phys_dim)),
+                            ("term_state", (N, self.sim.term_state_dim))):
             if s[name].shape != shape:
                 raise ValueError(f"buffer {name}: expected shape {shape}, got {s[name].shape}")
         self.phys.fn = <physics_fn>address

@@ -50,6 +50,9 @@ class Dims:
     # action dimensions) and floats of model-owned state per agent slot (`phys_state`)
     act_dim: int = 2
     phys_dim: int = 0
+    # floats of reward-term state per agent slot (`term_state`): the selected terms' declared
+    # widths (rewards/components.py `LinearReward.bind` lays them out)
+    term_state_dim: int = 0
 
     @staticmethod
     def of(sc: Scenario, W: int, G: int, max_obj: int, max_road: int, cand_cap: int, obs_dim: int) -> Dims:

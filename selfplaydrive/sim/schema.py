@@ -237,6 +237,9 @@ SIM_FIELDS: tuple[Field, ...] = (
         ("phys_dim", "floats of model-owned state per agent slot (0: none)"),
     ),
     Field("phys_state", "float*", ("N", "phys_dim"), "", "physics", "state the physics model owns"),
+    # reward terms with per-agent state (appended, ABI 1; rewards/components.py LinearReward.bind)
+    *_dims(("term_state_dim", "floats of reward-term state per agent slot (0: none)")),
+    Field("term_state", "float*", ("N", "term_state_dim"), "", "reward", "state the reward terms own"),
     # the Python side alone (not in sd_sim)
     Field(
         "agent_valid",

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from selfplaydrive.rewards.base import RewardHook
+from selfplaydrive.rewards.base import MapBoundTerm, RewardHook
 from selfplaydrive.scenario.base import Spawner
 from selfplaydrive.sim.actions import BoxActions
 
@@ -44,7 +44,7 @@ class ComponentCheckError(AssertionError):
 
 # reward terms ------------------------------------------------------------------------------
 def check_reward_term(
-    term: KernelTerm | RewardHook,
+    term: KernelTerm | RewardHook | MapBoundTerm,
     road_map: RoadMap | None = None,
     spawner: Spawner | None = None,
     steps: int = 30,
@@ -58,8 +58,9 @@ def check_reward_term(
     thread) and with `term` appended at weight 1 (1 and 2 threads). Checked at every step: the
     term's column is finite for the agents that acted and of shape (N,); with 1 and 2 threads it
     is the same bit for bit; and every buffer other than the reward outputs (its column, the
-    reward sum, the episode sums) and the other terms' columns equal those of the env without
-    the term (a term writes nothing else).
+    reward sum, the episode sums, the reward-term state a term with state owns) and the other
+    terms' columns equal those of the env without the term (a term writes nothing else). A
+    map-bound term (rewards/base.py `MapBoundTerm`) is bound to `road_map` by the envs.
 
     Args:
         term: The term.
@@ -72,13 +73,15 @@ def check_reward_term(
     Raises:
         ComponentCheckError: Naming the term and the first failed check (step, agent slot).
     """
-    from selfplaydrive.rewards.components import KernelTerm
+    from selfplaydrive.rewards.components import KernelTerm, _is_map_bound
 
-    if not isinstance(term, (KernelTerm, RewardHook)):
+    if not isinstance(term, (KernelTerm, RewardHook)) and not _is_map_bound(term):
         raise ComponentCheckError(
-            f"reward term {term!r}: expected a KernelTerm or a RewardHook (name and __call__(state))"
+            f"reward term {term!r}: expected a KernelTerm or a RewardHook (name and __call__(state)), "
+            "or a map-bound term (bind(maps))"
         )
-    label = f"reward term {term.name!r} ({term.form if isinstance(term, KernelTerm) else 'python'})"
+    form = term.form if isinstance(term, KernelTerm) else "map-bound" if _is_map_bound(term) else "python"
+    label = f"reward term {term.name!r} ({form})"
     road_map = road_map if road_map is not None else _default_map()
     spawner = spawner if spawner is not None else _small_spawner()
     envs = [
@@ -152,7 +155,7 @@ def _same_outside(label: str, ref: VecEnv, env: VecEnv, k: int) -> None:
     """Every buffer equal to the env without the term, but the reward sum and the term's own
     column (the last) of the per-term buffers."""
     for name, a in ref.buffers.items():
-        if name == "reward":
+        if name in ("reward", "term_state"):  # term_state: a term's own per-agent memory
             continue
         b = env.buffers[name]
         if name in _REWARD_OUTPUTS:

@@ -96,7 +96,7 @@ def test_a_mismatch_names_the_field():
     bad = [(n, "double*" if n == "speed" else c) for n, c in good]
     with pytest.raises(AssertionError, match=r"float\* speed"):
         compare(bad, "test", lambda n, c: f"{c} {n};")
-    with pytest.raises(AssertionError, match="phys_state"):
+    with pytest.raises(AssertionError, match="term_state"):
         compare(good[:-1], "test", lambda n, c: f"{c} {n};")
     with pytest.raises(AssertionError, match="extra_field"):
         compare([*good, ("extra_field", "int")], "test", lambda n, c: f"{c} {n};")
@@ -144,13 +144,16 @@ def test_allocate_follows_the_table():
 
 
 def test_struct_layout_offsets_by_hand():
-    """12 ints (48 bytes), then 8-byte pointers: x at 48, y at 56; act_dim follows cand_d."""
+    """12 ints (48 bytes), then 8-byte pointers: x at 48, y at 56; act_dim follows cand_d; the
+    reward terms' state closes the struct."""
     fields, size = schema.struct_layout()
     at = {name: (off, dt) for name, off, dt in fields}
     assert at["W"] == (0, None) and at["num_terms"] == (44, None)
     assert at["x"][0] == 48 and at["y"][0] == 56 and at["x"][1] == np.float32
     assert at["act_dim"][0] == at["cand_d"][0] + 8 and at["phys_dim"][0] == at["act_dim"][0] + 4
-    assert size == at["phys_state"][0] + 8
+    # term_state_dim (4 bytes + 4 of padding) and the term_state pointer close the struct
+    assert at["term_state_dim"][0] == at["phys_state"][0] + 8
+    assert at["term_state"][0] == at["term_state_dim"][0] + 8 and size == at["term_state"][0] + 8
 
 
 def test_struct_size_is_the_compiled_one():
