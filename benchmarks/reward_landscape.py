@@ -125,11 +125,14 @@ def rules(args) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # a map offering fewer scenarios: n shows it
         results = rule_returns.compare(cfg, names, args.count, args.seed)
-    print(f"overrides: {' '.join(args.overrides) or '(none)'}; {args.count} scenarios per loophole, seed {args.seed}")
+    shown = " ".join(args.overrides) or "(none)"
+    print(f"overrides: {shown}; {args.count} scenarios per loophole, seed {args.seed}")
     print(rule_returns.table(results))
     verdict = rule_returns.closed(results)
-    print("\nclosed (every rule breaker earns less than the compliant driver): "
-          + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in verdict.items()))
+    print(
+        "\nclosed (every rule breaker earns less than the compliant driver): "
+        + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in verdict.items())
+    )
     sys.stdout.flush()
 
 

@@ -76,7 +76,9 @@ def _has_oncoming(item: SuiteScenario) -> bool:
 REJOIN = 12.0  # [m] over which the bypass swerves back into its lane after the controlled area
 
 
-def swerve_path(path: np.ndarray, offset: float, out: tuple[float, float], back: tuple[float, float]) -> np.ndarray:
+def swerve_path(
+    path: np.ndarray, offset: float, out: tuple[float, float], back: tuple[float, float]
+) -> np.ndarray:
     """`path` shifted `offset` [m] to the left between arcs `out` and `back` [m]: the shift
     grows smoothly (cosine) from 0 to `offset` over `out` and falls back to 0 over `back`.
 
@@ -101,7 +103,8 @@ def bypass_and_rejoin(item: SuiteScenario) -> list[scripted.Plan]:
     line = float(info["line_arc_m"])
     out = (line - SWERVE[0], line - SWERVE[1])
     back = (line + GATE_DEPTH, line + GATE_DEPTH + REJOIN)
-    return [scripted.Plan(swerve_path(path, float(info["oncoming_offset_m"]), out, back), float(info["speed_mps"]))]
+    shifted = swerve_path(path, float(info["oncoming_offset_m"]), out, back)
+    return [scripted.Plan(shifted, float(info["speed_mps"]))]
 
 
 _COMPLY = Driver("comply", scripted.red_light_plans("comply"), compliant=True)
@@ -326,9 +329,8 @@ def compare(
         used = [with_stop_signs(m) for m in base] if name == "stop_sign" else base
 
         def env_factory(spawner: Any, num_worlds: int, used: list[RoadMap] = used) -> Any:
-            return build_env(
-                cfg, maps=used, spawner=spawner, num_worlds=num_worlds, actions=ContinuousActions(), num_threads=1
-            )
+            kwargs = {"maps": used, "spawner": spawner, "num_worlds": num_worlds, "num_threads": 1}
+            return build_env(cfg, actions=ContinuousActions(), **kwargs)
 
         items = scenarios(loophole, used, count, seed)
         out.extend(drive(env_factory, loophole, d, items, batch_size, seed) for d in loophole.drivers)
