@@ -79,6 +79,9 @@ cdef void reset_one(Sim* sim, const Atlas* atlas, const Params* prm, const Encod
     # physics components: a model's own per-agent state starts at 0 at spawn (abi.h)
     for k in range(w * sim.A * sim.phys_dim, (w + 1) * sim.A * sim.phys_dim):
         sim.phys_state[k] = 0.0
+    # reward terms with state (abi.h): their per-agent memory likewise starts at 0 at spawn
+    for k in range(w * sim.A * sim.term_state_dim, (w + 1) * sim.A * sim.term_state_dim):
+        sim.term_state[k] = 0.0
     encode_world(sim, atlas, prm, enc, w)
 
 
@@ -148,7 +151,8 @@ cdef class World:
         address, args = physics
         N = self.sim.W * self.sim.A
         for name, shape in (("act_i", (N, self.sim.act_dim)), ("act_f", (N, self.sim.act_dim)),
-                            ("phys_state", (N, self.sim.phys_dim))):
+                            ("phys_state", (N, self.sim.phys_dim)),
+                            ("term_state", (N, self.sim.term_state_dim))):
             if s[name].shape != shape:
                 raise ValueError(f"buffer {name}: expected shape {shape}, got {s[name].shape}")
         self.phys.fn = <physics_fn>address
@@ -182,6 +186,7 @@ cdef class World:
         self.sim.cand_cap = d["cand_cap"]; self.sim.obs_dim = d["obs_dim"]
         self.sim.num_terms = d["num_terms"]
         self.sim.act_dim = d["act_dim"]; self.sim.phys_dim = d["phys_dim"]
+        self.sim.term_state_dim = d.get("term_state_dim", 0)
 
     def _bind_agents(self, dict s):
         cdef list k = self.keep
@@ -236,6 +241,7 @@ cdef class World:
         self.sim.dist = <double*>ptr(s, "dist", f8, k)
         self.sim.cand = <int32_t*>ptr(s, "cand", i4, k); self.sim.cand_d = <float*>ptr(s, "cand_d", f4, k)
         self.sim.phys_state = <float*>ptr(s, "phys_state", f4, k)
+        self.sim.term_state = <float*>ptr(s, "term_state", f4, k)
 
     def _bind_atlas(self, dict a):
         cdef list k = self.keep

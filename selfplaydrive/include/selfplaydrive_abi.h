@@ -263,10 +263,20 @@ typedef struct sd_sim {
                                   /* (2 for the bicycle models' (accel, steer)) */
     int phys_dim;                 /* floats of model-owned state per agent slot (0: none) */
     float* phys_state;            /* (N, phys_dim) state the physics model owns; 0 at spawn */
+                                  /* --- reward-term state (appended, ABI 1; sd_reward_term_fn) --- */
+    int term_state_dim;           /* floats of reward-term state per agent slot: the sum of the */
+                                  /* selected terms' declared widths (0: none) */
+    float* term_state;            /* (N, term_state_dim) per-agent memory of the reward terms; each */
+                                  /* stateful term owns its columns [offset, offset + width), the */
+                                  /* offset given in its args; 0 at spawn */
 } sd_sim;
 /* A reward-term component (section 2.3): computes one term for every active agent slot of
  * world `w` and writes it to out[a * stride] for slot a in [0, sim->A). It reads the state
- * through `sim`, `prm` and `atlas` and writes nothing but `out`. Rows of inactive slots
+ * through `sim`, `prm` and `atlas` and writes `out` and its own state columns only: a term that
+ * declares a state width (`KernelTerm(state_dim=...)`) owns the columns [offset, offset + width)
+ * of sim->term_state (row i = w * A + a, sim->term_state_dim floats per row, zeroed at spawn),
+ * where offset = (int)args[0], set by the env when it lays out the selected terms' state
+ * (docs/components.md "Reward terms with state"). Rows of inactive slots
  * (sim->active[w * sim->A + a] == 0) may be left unwritten: the step zeroes them. `args` holds
  * the term's own parameters (the floats given to `KernelTerm(args=...)`, NULL when none). The
  * step multiplies the value by the term's weight afterwards. Called once per world inside the

@@ -214,6 +214,8 @@ cdef extern from "selfplaydrive_abi.h" nogil:
         int act_dim
         int phys_dim
         float* phys_state
+        int term_state_dim
+        float* term_state
 
     ctypedef void (*reward_term_fn "sd_reward_term_fn")(const Sim* sim, const Params* prm, const Atlas* atlas,
                                                       const float* args, int32_t w, float* out,

@@ -15,7 +15,10 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["RewardHook", "RewardModule"]
+    from selfplaydrive.maps.roadmap import RoadMap
+    from selfplaydrive.rewards.components import KernelTerm
+
+__all__ = ["MapBoundTerm", "RewardHook", "RewardModule"]
 
 
 @runtime_checkable
@@ -57,4 +60,26 @@ class RewardModule(Protocol):
 
     def plan(self) -> list[tuple[int, np.ndarray | None, float, int]]:
         """One (address, args, weight, native) per column, in order."""
+        ...
+
+
+@runtime_checkable
+class MapBoundTerm(Protocol):
+    """A compiled reward term that needs the env's map data (issue #15; docs/components.md
+    "Map-bound terms"): junction zones, stop lines, crosswalk polygons, lane segments.
+
+    It is registered and selected by name like any term; the env calls ``bind(maps)`` once at
+    construction (`LinearReward.bind`) and steps the `KernelTerm` it returns, whose float32
+    args pack the per-map tables after a small header (rewards/rule_tables.py).
+
+    Attributes:
+        name: Column name.
+        doc: One line for listings.
+    """
+
+    name: str
+    doc: str
+
+    def bind(self, maps: Sequence[RoadMap]) -> KernelTerm:
+        """The kernel term for an env whose world w plays ``maps[map_id[w]]``."""
         ...

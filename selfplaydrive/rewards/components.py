@@ -28,6 +28,7 @@ import numpy as np
 
 from selfplaydrive._abi_load import capsule_address, capsule_name, cython_capsule, numba_address
 from selfplaydrive.errors import ConfigError
+from selfplaydrive.rewards.base import MapBoundTerm
 from selfplaydrive.rewards.registry import TERM_NAMES, TERMS, RewardHook
 
 ABI_VERSION = 1  # SELFPLAYDRIVE_ABI_VERSION of selfplaydrive_abi.h
@@ -38,7 +39,7 @@ SIGNATURE = (
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class KernelTerm:
     """A reward term compiled to machine code, called inside the parallel step.
 
@@ -51,14 +52,21 @@ class KernelTerm:
         doc: One line for listings (`describe_terms`).
         owner: The object that owns the machine code (a numba cfunc, a module); kept alive
             with the term so the address stays valid.
+        state_dim: Floats of per-agent memory the term owns in the env's ``term_state``
+            buffer (0: none). A term with state reserves ``args[0]``: the env writes there the
+            offset of its first column (`LinearReward.bind`; docs/components.md).
+
+    `args` is a tuple of floats, or for large tables (a map-bound term's packed map data,
+    `MapBoundTerm`) a read-only float32 array, kept as it is.
     """
 
     name: str
     address: int
-    args: tuple[float, ...] = ()
+    args: tuple[float, ...] | np.ndarray = ()
     form: str = "address"
     doc: str = ""
     owner: Any = field(default=None, repr=False, compare=False)
+    state_dim: int = 0
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -66,21 +74,49 @@ class KernelTerm:
             raise ConfigError(
                 f"reward term {self.name!r}: address must be a positive integer, got {self.address!r}"
             )
-        try:
-            args = tuple(float(a) for a in self.args)
-        except (TypeError, ValueError):
-            args = (math.nan,)
-        if not all(math.isfinite(a) for a in args):
-            raise ConfigError(f"reward term {self.name!r}: args must be finite numbers, got {self.args!r}")
-        object.__setattr__(self, "args", args)
+        object.__setattr__(self, "args", _checked_args(self.name, self.args))
+        dim = self.state_dim
+        if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 0:
+            raise ConfigError(f"reward term {self.name!r}: state_dim must be an integer >= 0, got {dim!r}")
+        if dim > 0 and len(self.args) == 0:
+            raise ConfigError(
+                f"reward term {self.name!r}: a term with state (state_dim={dim}) reserves args[0] for "
+                "its state offset; give at least one arg"
+            )
+        object.__setattr__(self, "state_dim", int(dim))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, KernelTerm):
+            return NotImplemented
+        return (self.name, self.address, self.form, self.doc, self.state_dim) == (
+            other.name,
+            other.address,
+            other.form,
+            other.doc,
+            other.state_dim,
+        ) and np.array_equal(np.asarray(self.args, np.float64), np.asarray(other.args, np.float64))
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.address, self.form, len(self.args), self.state_dim))
 
     def with_args(self, *args: float) -> KernelTerm:
         """The same function with other parameters."""
-        return KernelTerm(self.name, self.address, tuple(args), self.form, self.doc, self.owner)
+        return KernelTerm(self.name, self.address, tuple(args), self.form, self.doc, self.owner, self.state_dim)
 
     def renamed(self, name: str) -> KernelTerm:
         """The same function and parameters under another column name."""
-        return KernelTerm(name, self.address, self.args, self.form, self.doc, self.owner)
+        return KernelTerm(name, self.address, self.args, self.form, self.doc, self.owner, self.state_dim)
+
+    def with_state_offset(self, offset: int) -> KernelTerm:
+        """This term with ``args[0]`` set to `offset`, the first of its ``term_state`` columns."""
+        if self.state_dim == 0:
+            return self
+        if isinstance(self.args, np.ndarray):
+            args: tuple[float, ...] | np.ndarray = self.args.copy()
+            args[0] = offset  # type: ignore[index]
+        else:
+            args = (float(offset), *self.args[1:])
+        return KernelTerm(self.name, self.address, args, self.form, self.doc, self.owner, self.state_dim)
 
     @classmethod
     def from_numba(cls, name: str, cfunc: Any, args: Sequence[float] = (), doc: str = "") -> KernelTerm:
@@ -123,7 +159,24 @@ class KernelTerm:
         return cls(name, address, tuple(args), "cython", doc, owner if owner is not None else capsule)
 
 
-Term = KernelTerm | RewardHook
+def _checked_args(name: str, args: object) -> tuple[float, ...] | np.ndarray:
+    """`args` as a tuple of finite floats, or (an array) as a read-only float32 copy."""
+    if isinstance(args, np.ndarray):
+        arr = np.array(args, dtype=np.float32).reshape(-1)
+        if not np.isfinite(arr).all():
+            raise ConfigError(f"reward term {name!r}: args must be finite numbers, got a non-finite entry")
+        arr.flags.writeable = False
+        return arr
+    try:
+        out = tuple(float(a) for a in args)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        out = (math.nan,)
+    if not all(math.isfinite(a) for a in out):
+        raise ConfigError(f"reward term {name!r}: args must be finite numbers, got {args!r}")
+    return out
+
+
+Term = KernelTerm | RewardHook | MapBoundTerm
 
 
 # the registry ------------------------------------------------------------------------------
@@ -150,6 +203,9 @@ ENTRY_POINT_GROUP = "selfplaydrive.reward_terms"
 def _registry() -> dict[str, Term]:
     if not _REGISTRY:  # the kernels are imported at first use: this module stays cheap to import
         _REGISTRY.update(_paper_terms())
+        from selfplaydrive.rewards.rules import RULE_TERMS  # issue #15: the rule terms, off by default
+
+        _REGISTRY.update({t.name: t for t in RULE_TERMS})
     return _REGISTRY
 
 
@@ -234,8 +290,9 @@ class TermColumn:
 
     @property
     def native(self) -> bool:
-        """Computed inside the parallel step (a `KernelTerm`), not in Python afterwards."""
-        return isinstance(self.term, KernelTerm)
+        """Computed inside the parallel step (a `KernelTerm`, or a `MapBoundTerm` once bound),
+        not in Python afterwards."""
+        return isinstance(self.term, KernelTerm) or _is_map_bound(self.term)
 
 
 class LinearReward:
@@ -306,6 +363,37 @@ class LinearReward:
         _check_width(len(out.columns))
         return out
 
+    def bind(self, maps: Sequence[Any]) -> LinearReward:
+        """This reward for an env with `maps`: every map-bound term (`MapBoundTerm`) replaced
+        by the `KernelTerm` its ``bind(maps)`` returns, and the ``term_state`` columns laid out
+        (each term with state gets the next `state_dim` columns; ``args[0]`` holds their
+        offset). `VecEnv` calls it at construction.
+
+        Raises:
+            ConfigError: A map-bound term's ``bind`` returned no `KernelTerm`.
+        """
+        out = LinearReward.__new__(LinearReward)
+        columns, offset = [], 0
+        for c in self.columns:
+            term = c.term
+            if _is_map_bound(term):
+                term = term.bind(maps)  # type: ignore[union-attr]
+                if not isinstance(term, KernelTerm):
+                    raise ConfigError(
+                        f"reward term {c.name!r}: bind(maps) must return a KernelTerm, got {type(term).__name__}"
+                    )
+            if isinstance(term, KernelTerm) and term.state_dim:
+                term = term.with_state_offset(offset)
+                offset += term.state_dim
+            columns.append(TermColumn(c.name, term, c.weight))
+        out.columns = tuple(columns)
+        return out
+
+    @property
+    def term_state_dim(self) -> int:
+        """Floats of reward-term state per agent slot (the env's ``term_state`` width)."""
+        return sum(c.term.state_dim for c in self.columns if isinstance(c.term, KernelTerm))
+
     def plan(self) -> list[tuple[int, np.ndarray | None, float, int]]:
         """(address, float32 args or None, weight, native) per column for the step
         (`_sim.world.World`); address 0: no call for that column (a Python column, native 0,
@@ -318,8 +406,10 @@ class LinearReward:
         """
         out: list[tuple[int, np.ndarray | None, float, int]] = []
         for c in self.columns:
+            if _is_map_bound(c.term):
+                raise ConfigError(f"reward term {c.name!r} needs the env's maps: call bind(maps) before plan()")
             if isinstance(c.term, KernelTerm):
-                args = np.asarray(c.term.args, dtype=np.float32) if c.term.args else None
+                args = np.ascontiguousarray(c.term.args, dtype=np.float32) if len(c.term.args) else None
                 out.append((c.term.address, args, c.weight, 1))
             else:
                 out.append((0, None, c.weight, 0))
@@ -327,7 +417,7 @@ class LinearReward:
         for k in range(len(self.columns) - len(paper) + 1):
             run = [c.term for c in self.columns[k : k + len(paper)]]
             if all(
-                isinstance(t, KernelTerm) and t.address == p.address and not t.args
+                isinstance(t, KernelTerm) and t.address == p.address and not len(t.args)
                 for t, p in zip(run, paper, strict=True)
             ):
                 from selfplaydrive._sim.reward import paper_group_address
@@ -353,12 +443,12 @@ def _weight_and_args(name: str, spec: object, term: Term) -> tuple[float, Term]:
             )
         weight = spec.get("weight", 1.0)
         if "args" in spec:
-            if not isinstance(term, KernelTerm):
+            if not isinstance(term, KernelTerm) and not _is_map_bound(term):
                 raise ConfigError(f"reward term {name!r}: args are for compiled terms (KernelTerm) only")
             args = spec["args"]
             if isinstance(args, (str, bytes)) or not isinstance(args, Sequence):
                 raise ConfigError(f"reward term {name!r}: args must be a list of numbers, got {args!r}")
-            term = term.with_args(*args)
+            term = term.with_args(*args)  # type: ignore[union-attr]
     if isinstance(weight, bool) or not isinstance(weight, (int, float, np.number)):
         raise ConfigError(f"reward weight of {name!r}: expected a number, got {weight!r}")
     if not math.isfinite(float(weight)):
@@ -370,8 +460,12 @@ def describe_terms() -> list[tuple[str, str, str]]:
     """(name, form, description) of every registered term, for listings and docs."""
     out = []
     for name, t in _registry().items():
-        form = t.form if isinstance(t, KernelTerm) else "python"
-        doc = t.doc if isinstance(t, KernelTerm) else (type(t).__doc__ or "").strip().split("\n")[0]
+        if isinstance(t, KernelTerm):
+            form, doc = t.form, t.doc
+        elif _is_map_bound(t):
+            form, doc = "map-bound", str(getattr(t, "doc", ""))
+        else:
+            form, doc = "python", (type(t).__doc__ or "").strip().split("\n")[0]
         out.append((name, form, doc))
     return out
 
@@ -382,8 +476,16 @@ def _check_name(name: object) -> None:
         raise ConfigError(f"reward term name: expected a non-empty string without '/', got {name!r}")
 
 
+def _is_map_bound(t: object) -> bool:
+    """A map-bound term (`MapBoundTerm`): not itself a kernel, but it binds to one."""
+    return not isinstance(t, KernelTerm) and callable(getattr(t, "bind", None))
+
+
 def _check_term(t: object) -> None:
     if isinstance(t, KernelTerm):
+        return
+    if _is_map_bound(t):
+        _check_name(getattr(t, "name", None))
         return
     name = getattr(t, "name", None)
     _check_name(name)

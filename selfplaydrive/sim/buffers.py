@@ -38,6 +38,9 @@ class Dims:
     # action dimensions) and floats of model-owned state per agent slot (`phys_state`)
     act_dim: int = 2
     phys_dim: int = 0
+    # floats of reward-term state per agent slot (`term_state`): the selected terms' declared
+    # widths (rewards/components.py `LinearReward.bind` lays them out)
+    term_state_dim: int = 0
 
     @staticmethod
     def of(sc: Scenario, W: int, G: int, max_obj: int, max_road: int, cand_cap: int, obs_dim: int) -> Dims:
@@ -102,6 +105,7 @@ def _shapes(d: Dims) -> dict[str, tuple[tuple[int, ...], type]]:
         act_i=((N, d.act_dim), i4),
         act_f=((N, d.act_dim), f4),
         phys_state=((N, d.phys_dim), f4),
+        term_state=((N, d.term_state_dim), f4),
         terms=((N, d.num_terms), f4),
         obs=((N, d.obs_dim), f4),
         final_obs=((N, d.obs_dim), f4),

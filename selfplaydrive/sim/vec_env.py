@@ -156,7 +156,9 @@ class VecEnv:
         self.num_threads = num_threads
         self.terminated_vehicle = terminated_vehicle
         self.reward_hooks = list(reward_hooks)
-        self.reward = _reward(reward).with_hooks(self.reward_hooks)
+        # map-bound terms (rules.py: junction zones, stop lines ...) pack this env's maps, and
+        # terms with per-agent state get their `term_state` columns (docs/components.md)
+        self.reward = _reward(reward).bind(self.maps).with_hooks(self.reward_hooks)
         self.obs_hooks = list(obs_hooks)
         self.profile = bool(profile)
         self.layout = dataclasses.replace(
@@ -182,7 +184,10 @@ class VecEnv:
         )
         self.dims = dataclasses.replace(self.dims, num_terms=len(self.reward.columns))
         self.dims = dataclasses.replace(
-            self.dims, act_dim=int(self.action_table.dim), phys_dim=int(self.physics.state_dim)
+            self.dims,
+            act_dim=int(self.action_table.dim),
+            phys_dim=int(self.physics.state_dim),
+            term_state_dim=int(self.reward.term_state_dim),
         )
         _check_memory(self.dims)
         self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]

@@ -14,7 +14,8 @@ Generation (lane graph and geometry only):
 2. The *gate* is the road cross-section at the line: the segment through the line's point on
    the path, perpendicular to the path, `GATE_LEFT` m to the left (the oncoming side) and
    `GATE_RIGHT` m to the right (shoulder). The *controlled area* is the band `GATE_DEPTH` m
-   deep beyond the gate: whoever is in it has passed the junction entry of this approach. The
+   deep beyond the gate: whoever is in it has passed the junction entry of this approach
+   (maps/rule_geometry.py, shared with the `red_intersection` reward term). The
    *red lines* are the traffic-light lines lying on the gate (within 0.5 m, within 30 degrees
    of it): the lines of this approach's lanes.
 3. Gate labels: points along the gate 10 m before it are labelled "controlled" (behind a red
@@ -61,13 +62,14 @@ from selfplaydrive.eval.suites.geometry import LaneGeometry, cumlen, cut, point_
 from selfplaydrive.eval.suites.shapes import box_polygons, lane_polygons, offset_path
 from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
 from selfplaydrive.maps.roadmap import RoadMap
+# the gate and the controlled area: one definition for this suite and the red_intersection
+# reward term (maps/rule_geometry.py)
+from selfplaydrive.maps.rule_geometry import GATE_DEPTH, GATE_LEFT, GATE_RIGHT, controlled_area
+from selfplaydrive.maps.rule_geometry import gate as _gate
 from selfplaydrive.scenario.lights import GREEN, RED
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
 OUTCOMES = ("stopped", "ran", "bypassed", "collision", "offroad")
-GATE_LEFT = 12.0  # [m] of gate left of the line point: covers two oncoming lanes and a kerb
-GATE_RIGHT = 4.0  # [m] right of it: the shoulder
-GATE_DEPTH = 6.0  # [m] of controlled area beyond the gate
 ENTRY_AREA = 1.0  # [m^2] box overlap that counts as entering: ~0.5 m of a car's width, so a
 # car stopping with its bumper just over the line has not entered (`line_touched` shows it)
 LABEL_STEP = 0.25  # [m] between labelled gate points
@@ -195,8 +197,7 @@ class RedLightSuite:
         sc.light_state[:] = GREEN
         sc.light_state[np.unique(road_map.light_group[reds])] = RED
         sc.light_time_left[:] = NEVER
-        u = np.array([np.cos(hd), np.sin(hd)])
-        area = np.array([gate[0], gate[1], gate[1] + GATE_DEPTH * u, gate[0] + GATE_DEPTH * u])
+        area = controlled_area(c, float(hd))
         paths = {"ego": path, "gate": gate, "area": area}
         for j, r in enumerate(reds):
             paths[f"red_line_{j}"] = road_map.light_lines[r].astype(np.float64)
@@ -224,12 +225,6 @@ class RedLightSuite:
 
     def summarise(self, outcomes: Sequence[dict[str, Any]]) -> dict[str, Any]:
         return summarise_red_lights(outcomes)
-
-
-def _gate(c: np.ndarray, heading: float) -> np.ndarray:
-    """(2, 2) gate end points: right end first, then left end [m]."""
-    left = np.array([-np.sin(heading), np.cos(heading)])
-    return np.stack([c - GATE_RIGHT * left, c + GATE_LEFT * left])
 
 
 def _upstream_light(shapes: _MapShapes, path: np.ndarray, s_line: float) -> float:

@@ -1,0 +1,198 @@
+"""Rule-complete reward terms (issue #15): the failure modes of paper section 5.1 as optional
+reward components, each off by default (the paper configuration and its digests are unchanged).
+
+- ``red_intersection``: -1 on entering the area a red light controls by any path (own lane,
+  oncoming lane, shoulder), not only on touching its line (the paper's reward hack, 5.1 "Red
+  Lights"). The area is the red-light suite's (maps/rule_geometry.py).
+- ``stop_sign``: -1 on crossing a STOP line without a stop before it (5.1 "Stop Signs"; YIELD
+  lines stay unpenalised, as in the paper, section 2.1). One column of per-agent state.
+- ``crosswalk_yield``: -1 on entering a crosswalk a pedestrian is on or about to step on
+  (5.1: the policy yielded to 39 % of crossing pedestrians).
+- ``wrong_way``: -1 per second (-dt per step) of driving against the direction of the lane the
+  centre lies on (the oncoming-lane bypass, which the paper's lane association does not see).
+
+Each is a `RuleTerm`, a map-bound term: ``bind(maps)`` packs the maps' tables into the args of
+the `KernelTerm` the env steps (_sim/rules.pyx; layout in rewards/rule_tables.py). Select one
+with ``LinearReward({..., "red_intersection": 1.0})`` or Hydra ``+reward.terms.red_intersection=1.0``;
+its parameters with ``{weight: W, args: [...]}`` (`RuleTerm.param_names`). docs/rewards.md gives
+the formulas; selfplaydrive/testing/rule_terms.py the NumPy references.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.maps.elements import LaneKind, StopKind
+from selfplaydrive.maps.roadmap import RoadMap
+from selfplaydrive.maps.rule_geometry import GATE_DEPTH, GATE_LEFT, GATE_RIGHT, controlled_area, controlled_zones
+from selfplaydrive.rewards.components import KernelTerm
+from selfplaydrive.rewards.rule_tables import grid_body, pack
+
+__all__ = ["RULE_TERMS", "RuleTerm", "crosswalk_records", "lane_records", "stop_records", "zone_records"]
+
+
+@dataclass(frozen=True)
+class RuleTerm:
+    """A map-bound rule term (`MapBoundTerm`): its kernel, parameters and map tables.
+
+    Attributes:
+        name: Column name.
+        params: Parameter values, in the order of `param_names`.
+        param_names: What each parameter is (with its unit).
+        tables: RoadMap -> (records (n, R), boxes (n, 4)) of one map.
+        state_dim: Per-agent state columns the kernel owns.
+        doc: One line for listings.
+    """
+
+    name: str
+    params: tuple[float, ...]
+    param_names: tuple[str, ...]
+    tables: Callable[[RoadMap], tuple[np.ndarray, np.ndarray]]
+    state_dim: int = 0
+    doc: str = ""
+
+    def with_args(self, *args: float) -> RuleTerm:
+        """This term with other parameter values (``{weight: W, args: [...]}`` in a reward).
+
+        Raises:
+            ConfigError: Another number of values than `param_names`, or a non-finite one.
+        """
+        if len(args) != len(self.param_names):
+            raise ConfigError(
+                f"reward term {self.name!r}: args must be {len(self.param_names)} numbers "
+                f"({', '.join(self.param_names)}), got {list(args)!r}"
+            )
+        try:
+            values = tuple(float(a) for a in args)
+        except (TypeError, ValueError):
+            values = (math.nan,)
+        if not all(math.isfinite(v) for v in values):
+            raise ConfigError(f"reward term {self.name!r}: args must be finite numbers, got {list(args)!r}")
+        return replace(self, params=values)
+
+    def bind(self, maps: Sequence[RoadMap]) -> KernelTerm:
+        """The kernel term whose args pack `maps`' tables (world w reads ``maps[map_id[w]]``)."""
+        from selfplaydrive._sim import rules
+
+        bodies = [grid_body(*self.tables(m)) for m in maps]
+        args = pack(self.name, self.params, bodies)
+        address = int(rules.rule_term_addresses()[self.name])
+        return KernelTerm(self.name, address, args, "builtin", self.doc, rules, self.state_dim)
+
+
+# map tables -----------------------------------------------------------------------------------
+def zone_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+    """Controlled areas: (cx, cy, ux, uy, group) per (light line, vehicle lane), and boxes."""
+    z = controlled_zones(road_map)
+    rec = np.stack([z[:, 0], z[:, 1], np.cos(z[:, 2]), np.sin(z[:, 2]), z[:, 3]], axis=1)
+    corners = [controlled_area(r[:2], float(r[2])) for r in z]
+    return rec, _boxes(corners)
+
+
+def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+    """STOP-line segments: (ax, ay, ex, ey, nx, ny) per segment of a STOP line and lane it
+    applies to (e = b - a, n the unit normal pointing along the lane), and boxes. YIELD lines
+    and lines that apply to no lane are left out."""
+    rows, boxes = [], []
+    offsets, index = road_map.stop_lane_offsets, road_map.stop_lane_index
+    for k in range(len(road_map.stop_lines)):
+        if int(road_map.stop_kind[k]) != int(StopKind.STOP):
+            continue
+        pts = road_map.stop_lines[k].astype(np.float64)
+        for lane in index[offsets[k] : offsets[k + 1]]:
+            u = _lane_direction(road_map, int(lane), pts)
+            for a, b in zip(pts[:-1], pts[1:], strict=True):
+                e = b - a
+                n = np.array([e[1], -e[0]]) / max(float(np.hypot(*e)), 1e-9)
+                n = n if float(n @ u) >= 0.0 else -n
+                rows.append([a[0], a[1], e[0], e[1], n[0], n[1]])
+                boxes.append([min(a[0], b[0]), min(a[1], b[1]), max(a[0], b[0]), max(a[1], b[1])])
+    return np.array(rows, np.float64).reshape(-1, 6), np.array(boxes, np.float64).reshape(-1, 4)
+
+
+def crosswalk_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+    """Crosswalk polygons: (nv, xmin, ymin, xmax, ymax, x0, y0, ...) padded to the map's most
+    vertices, and boxes."""
+    polys = [road_map.crosswalks[k].astype(np.float64) for k in range(len(road_map.crosswalks))]
+    vmax = max([len(p) for p in polys], default=0)
+    rows = np.zeros((len(polys), 5 + 2 * vmax))
+    for j, p in enumerate(polys):
+        rows[j, :5] = [len(p), *p.min(axis=0), *p.max(axis=0)]
+        rows[j, 5 : 5 + 2 * len(p)] = p.reshape(-1)
+    return rows, rows[:, 1:5].copy()
+
+
+def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+    """Vehicle-lane centerline segments: (ax, ay, ux, uy, length, half width), and boxes grown
+    by the half width."""
+    lanes = road_map.lanes
+    rows = []
+    for i in range(len(lanes)):
+        if int(lanes.kind[i]) == int(LaneKind.BICYCLE):
+            continue
+        p = lanes.centerlines[i].astype(np.float64)
+        d = np.diff(p, axis=0)
+        ln = np.hypot(d[:, 0], d[:, 1])
+        ok = ln > 1e-6
+        u = d[ok] / ln[ok, None]
+        hw = np.full(int(ok.sum()), 0.5 * float(lanes.width[i]))
+        rows.append(np.column_stack([p[:-1][ok], u, ln[ok], hw]))
+    rec = np.concatenate(rows) if rows else np.zeros((0, 6))
+    b = rec[:, :2] + rec[:, 2:4] * rec[:, 4:5]
+    lo = np.minimum(rec[:, :2], b) - rec[:, 5:6]
+    hi = np.maximum(rec[:, :2], b) + rec[:, 5:6]
+    return rec, np.concatenate([lo, hi], axis=1)
+
+
+def _lane_direction(road_map: RoadMap, lane: int, pts: np.ndarray) -> np.ndarray:
+    """Unit direction of `lane`'s centerline segment nearest to the line points `pts`."""
+    p = road_map.lanes.centerlines[lane].astype(np.float64)
+    mid = 0.5 * (p[:-1] + p[1:])
+    d = np.diff(p, axis=0)
+    k = int(np.argmin(np.min(np.hypot(*(mid[:, None] - pts[None]).transpose(2, 0, 1)), axis=1)))
+    return d[k] / max(float(np.hypot(*d[k])), 1e-9)
+
+
+def _boxes(corners: list[np.ndarray]) -> np.ndarray:
+    if not corners:
+        return np.zeros((0, 4))
+    c = np.stack(corners)
+    return np.concatenate([c.min(axis=1), c.max(axis=1)], axis=1)
+
+
+RULE_TERMS = (
+    RuleTerm(
+        "red_intersection",
+        (GATE_LEFT, GATE_RIGHT, GATE_DEPTH, math.cos(math.radians(60.0))),
+        ("gate_left [m]", "gate_right [m]", "gate_depth [m]", "cos of the largest heading deviation"),
+        zone_records,
+        doc="R = -1 on entering a red light's controlled area (any path) heading into it",
+    ),
+    RuleTerm(
+        "stop_sign",
+        (0.5, 8.0),
+        ("v_stop [m/s]", "distance [m] (front of the car, before the line)"),
+        stop_records,
+        state_dim=1,
+        doc="R = -1 on crossing a STOP line without a stop (v <= 0.5 m/s) within 8 m before it",
+    ),
+    RuleTerm(
+        "crosswalk_yield",
+        (1.5, 1.0),
+        ("t_ahead [s]", "margin [m]"),
+        crosswalk_records,
+        doc="R = -1 on entering a crosswalk a pedestrian is on or reaches within 1.5 s",
+    ),
+    RuleTerm(
+        "wrong_way",
+        (1.0,),
+        ("v_min [m/s]",),
+        lane_records,
+        doc="R = -dt (-1 per second) driving against the lane the centre lies on",
+    ),
+)
