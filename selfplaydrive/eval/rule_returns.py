@@ -30,10 +30,11 @@ from selfplaydrive.eval.suites import scripted
 from selfplaydrive.eval.suites.base import SuiteScenario, run_suite
 from selfplaydrive.eval.suites.crosswalks import CrosswalkSuite
 from selfplaydrive.eval.suites.geometry import cumlen, point_at
-from selfplaydrive.eval.suites.red_lights import GATE_DEPTH, SWERVE, RedLightSuite
+from selfplaydrive.eval.suites.red_lights import SWERVE, RedLightSuite
 from selfplaydrive.eval.suites.report import generate_all
 from selfplaydrive.eval.suites.stop_signs import StopSignSuite
 from selfplaydrive.maps.roadmap import RoadMap, StopKind
+from selfplaydrive.maps.rule_geometry import GATE_DEPTH
 
 
 @dataclass(frozen=True)
