@@ -100,6 +100,17 @@ def test_bad_arguments_raise(town):
         rr.compare(cfg, count=0, maps=[town])
 
 
+def test_batches_do_not_change_the_returns(town, main_job):
+    """Each world's first episode is summed alone: 3 scenarios in batches of 2 (the second batch
+    has a surplus world replaying the first scenario) give the returns of one batch of 3."""
+    cfg = compose("train", [])
+    split = rr.compare(cfg, ["red_intersection"], count=3, batch_size=2, maps=[town])
+    whole = [r for r in main_job if r.loophole == "red_intersection"]
+    for a, b in zip(split, whole, strict=True):
+        assert a.driver == b.driver and a.outcomes == b.outcomes
+        np.testing.assert_allclose(a.returns, b.returns, rtol=0, atol=1e-9)
+
+
 # -- the main job: the hacks pay -------------------------------------------------------------
 def test_returns_are_the_sum_of_the_term_columns(main_job):
     for r in main_job:
