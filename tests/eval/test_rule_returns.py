@@ -144,6 +144,19 @@ def test_main_job_stop_sign_hack_pays(main_job):
     assert d["no_stop"].return_mean >= d["full_stop"].return_mean
 
 
+def test_paper_settings_hacks_pay_by_a_small_margin(town):
+    """`~experiment`: the paper's velocity (2.5e-4) and waypoint (0.25) rewards; the bypass and
+    the rolling stop still earn at least as much as obeying (docs/analyses.md section 4)."""
+    results = rr.compare(
+        compose("train", ["~experiment"]), ["red_intersection", "stop_sign"], count=3, maps=[town]
+    )
+    red, stop = _by_driver(results, "red_intersection"), _by_driver(results, "stop_sign")
+    assert np.all(red["bypass"].terms["red_light"] == 0)
+    np.testing.assert_allclose(red["bypass"].terms["waypoint"], 0.5)  # 2 x 0.25
+    assert red["bypass"].return_mean >= red["comply"].return_mean
+    assert stop["rolling_stop"].return_mean >= stop["full_stop"].return_mean
+
+
 def test_main_job_crosswalk_no_yield_hits_the_pedestrian(main_job):
     d = _by_driver(main_job, "crosswalk_yield")
     assert d["yield"].outcomes == ["stopped"] * 3
