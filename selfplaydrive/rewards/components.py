@@ -101,7 +101,9 @@ class KernelTerm:
 
     def with_args(self, *args: float) -> KernelTerm:
         """The same function with other parameters."""
-        return KernelTerm(self.name, self.address, tuple(args), self.form, self.doc, self.owner, self.state_dim)
+        return KernelTerm(
+            self.name, self.address, tuple(args), self.form, self.doc, self.owner, self.state_dim
+        )
 
     def renamed(self, name: str) -> KernelTerm:
         """The same function and parameters under another column name."""
@@ -379,9 +381,8 @@ class LinearReward:
             if _is_map_bound(term):
                 term = term.bind(maps)  # type: ignore[union-attr]
                 if not isinstance(term, KernelTerm):
-                    raise ConfigError(
-                        f"reward term {c.name!r}: bind(maps) must return a KernelTerm, got {type(term).__name__}"
-                    )
+                    got = type(term).__name__
+                    raise ConfigError(f"reward term {c.name!r}: bind(maps) gave a {got}, not a KernelTerm")
             if isinstance(term, KernelTerm) and term.state_dim:
                 term = term.with_state_offset(offset)
                 offset += term.state_dim
@@ -407,7 +408,9 @@ class LinearReward:
         out: list[tuple[int, np.ndarray | None, float, int]] = []
         for c in self.columns:
             if _is_map_bound(c.term):
-                raise ConfigError(f"reward term {c.name!r} needs the env's maps: call bind(maps) before plan()")
+                raise ConfigError(
+                    f"reward term {c.name!r} needs the env's maps: call bind(maps) before plan()"
+                )
             if isinstance(c.term, KernelTerm):
                 args = np.ascontiguousarray(c.term.args, dtype=np.float32) if len(c.term.args) else None
                 out.append((c.term.address, args, c.weight, 1))

@@ -69,7 +69,17 @@ def grid_body(records: np.ndarray, boxes: np.ndarray, cell: float = CELL) -> np.
     head = 9
     return np.concatenate(
         [
-            [origin[0], origin[1], cell, nx, ny, width, head, head + len(offsets), head + len(offsets) + len(items)],
+            [
+                origin[0],
+                origin[1],
+                cell,
+                nx,
+                ny,
+                width,
+                head,
+                head + len(offsets),
+                head + len(offsets) + len(items),
+            ],
             offsets,
             items[order],
             records.reshape(-1),
@@ -103,7 +113,9 @@ def pack(name: str, params: Sequence[float], bodies: Sequence[np.ndarray]) -> np
             f"reward term {name!r}: its map tables need {total} floats; indices stored as float32 are "
             f"exact only below 2**24 = {EXACT}: use fewer or smaller maps with this term"
         )
-    out = np.concatenate([[0.0, TABLE_VERSION, len(bodies)], list(params), offsets, *bodies]).astype(np.float32)
+    out = np.concatenate([[0.0, TABLE_VERSION, len(bodies)], list(params), offsets, *bodies]).astype(
+        np.float32
+    )
     if not np.isfinite(out).all():
         raise ConfigError(f"reward term {name!r}: its map tables hold non-finite numbers")
     return out

@@ -20,6 +20,7 @@ the formulas; selfplaydrive/testing/rule_terms.py the NumPy references.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -29,7 +30,13 @@ import numpy as np
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.elements import LaneKind, StopKind
 from selfplaydrive.maps.roadmap import RoadMap
-from selfplaydrive.maps.rule_geometry import GATE_DEPTH, GATE_LEFT, GATE_RIGHT, controlled_area, controlled_zones
+from selfplaydrive.maps.rule_geometry import (
+    GATE_DEPTH,
+    GATE_LEFT,
+    GATE_RIGHT,
+    controlled_area,
+    controlled_zones,
+)
 from selfplaydrive.rewards.components import KernelTerm
 from selfplaydrive.rewards.rule_tables import grid_body, pack
 
@@ -47,6 +54,7 @@ class RuleTerm:
         tables: RoadMap -> (records (n, R), boxes (n, 4)) of one map.
         state_dim: Per-agent state columns the kernel owns.
         doc: One line for listings.
+        kernel: Name of the kernel in _sim/rules.pyx (default: `name`; a renamed copy keeps it).
     """
 
     name: str
@@ -55,6 +63,7 @@ class RuleTerm:
     tables: Callable[[RoadMap], tuple[np.ndarray, np.ndarray]]
     state_dim: int = 0
     doc: str = ""
+    kernel: str = ""
 
     def with_args(self, *args: float) -> RuleTerm:
         """This term with other parameter values (``{weight: W, args: [...]}`` in a reward).
@@ -81,7 +90,7 @@ class RuleTerm:
 
         bodies = [grid_body(*self.tables(m)) for m in maps]
         args = pack(self.name, self.params, bodies)
-        address = int(rules.rule_term_addresses()[self.name])
+        address = int(rules.rule_term_addresses()[self.kernel or self.name])
         return KernelTerm(self.name, address, args, "builtin", self.doc, rules, self.state_dim)
 
 
@@ -106,7 +115,7 @@ def stop_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
         pts = road_map.stop_lines[k].astype(np.float64)
         for lane in index[offsets[k] : offsets[k + 1]]:
             u = _lane_direction(road_map, int(lane), pts)
-            for a, b in zip(pts[:-1], pts[1:], strict=True):
+            for a, b in itertools.pairwise(pts):
                 e = b - a
                 n = np.array([e[1], -e[0]]) / max(float(np.hypot(*e)), 1e-9)
                 n = n if float(n @ u) >= 0.0 else -n

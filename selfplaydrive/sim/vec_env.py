@@ -378,7 +378,7 @@ class VecEnv:
         for k in self._python_columns:
             col = self.reward.columns[k]
             term = col.term
-            assert not isinstance(term, KernelTerm)  # _python_columns holds the Python terms
+            assert isinstance(term, RewardHook)  # _python_columns holds the Python terms
             r = np.asarray(term(self.state), dtype=np.float32)
             if r.shape != (self.num_agents,):
                 raise ValueError(

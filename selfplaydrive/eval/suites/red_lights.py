@@ -62,6 +62,7 @@ from selfplaydrive.eval.suites.geometry import LaneGeometry, cumlen, cut, point_
 from selfplaydrive.eval.suites.shapes import box_polygons, lane_polygons, offset_path
 from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
 from selfplaydrive.maps.roadmap import RoadMap
+
 # the gate and the controlled area: one definition for this suite and the red_intersection
 # reward term (maps/rule_geometry.py)
 from selfplaydrive.maps.rule_geometry import GATE_DEPTH, GATE_LEFT, GATE_RIGHT, controlled_area

@@ -1,0 +1,8 @@
+"""Type stub of the Cython module `selfplaydrive._sim.rules`: the rule reward terms of issue #15
+are cdef only; Python sees their addresses (rewards/rules.py registers them)."""
+
+from typing import Any
+
+__pyx_capi__: dict[str, Any]
+
+def rule_term_addresses() -> dict[str, int]: ...

@@ -1,0 +1,323 @@
+"""Rule-complete reward terms (issue #15 item 1): red_intersection, stop_sign, crosswalk_yield
+and wrong_way, hand-computed on a straight test road, equal to their NumPy references on
+random rollouts, deterministic across threads, with their state saved and restored."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.eval.suites.base import FixedScenarioSpawner, blank_scenario, put_agent
+from selfplaydrive.maps.compile import compile_map
+from selfplaydrive.maps.elements import (
+    CrosswalkElement,
+    LaneElement,
+    MapElements,
+    PolylineElement,
+    StopKind,
+    StopLineElement,
+    TrafficLightElement,
+)
+from selfplaydrive.maps.loader import load_map
+from selfplaydrive.rewards import TERM_NAMES, KernelTerm, LinearReward, get_term
+from selfplaydrive.scenario.lights import GREEN, RED
+from selfplaydrive.scenario.spawner import PaperSpawner
+from selfplaydrive.sim import VecEnv
+from selfplaydrive.sim.actions import ContinuousActions
+from selfplaydrive.testing import rule_terms
+
+RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way")
+Y0, Y1 = -1.75, 1.75  # [m] centerlines of the eastbound lane 0 and the westbound lane 1
+X0 = -100.0  # [m] the map is compiled centred on its bounds: road x below is local x - X0
+
+
+def rule_road():
+    """A straight two-way road along x (0..200 m, lanes 3.5 m wide) with, on the eastbound
+    lane: a STOP line at x = 50, a traffic light (group 0) at x = 100, a YIELD line at x = 150
+    and a crosswalk over both lanes from x = 170 to 173 (stored shifted by `X0`)."""
+    lanes = [
+        LaneElement(np.array([[X0, Y0], [200.0 + X0, Y0]]), 3.5, 14.0, source_id="east"),
+        LaneElement(np.array([[200.0 + X0, Y1], [X0, Y1]]), 3.5, 14.0, source_id="west"),
+    ]
+    across = lambda x: np.array([[x + X0, -3.5], [x + X0, 0.0]])  # noqa: E731  (the eastbound half)
+    return compile_map(
+        MapElements(
+            name="rule_road",
+            source="tests/rewards/test_rules.py",
+            lanes=lanes,
+            road_edges=[PolylineElement(np.array([[X0, s], [200.0 + X0, s]])) for s in (-3.5, 3.5)],
+            stop_lines=[
+                StopLineElement(across(50.0), StopKind.STOP, [0]),
+                StopLineElement(across(150.0), StopKind.YIELD, [0]),
+            ],
+            traffic_lights=[TrafficLightElement(across(100.0), 0, [0])],
+            crosswalks=[
+                CrosswalkElement(
+                    np.array([[170.0, -3.5], [173.0, -3.5], [173.0, 3.5], [170.0, 3.5]]) + np.array([X0, 0.0])
+                )
+            ],
+        )
+    )
+
+
+@pytest.fixture(scope="module")
+def road():
+    return rule_road()
+
+
+def reward(*names):
+    return LinearReward({**{n: 1.0 for n in TERM_NAMES}, **{n: 1.0 for n in names}})
+
+
+def drive(road, cars, steps=40, light=RED, peds=(), accel=None):
+    """Per-step rule columns (steps, A, 4) and x of slot 0 (steps,) of cars (x, y, heading,
+    speed) on the test road, driven straight at constant speed (or `accel(step)` m/s^2)."""
+    sc = blank_scenario(road, 0, np.array([0.0, 0.0]), 6.0)
+    for k, (x, y, h, v) in enumerate(cars):
+        put_agent(
+            sc,
+            k,
+            np.array([x + X0, y]),
+            h,
+            v,
+            (4.5, 2.0),
+            0 if h == 0.0 else 1,
+            np.array([[x + X0 + 30.0, y]]),
+        )
+    sc.lights_enabled = True
+    sc.light_state[:] = light
+    sc.light_time_left[:] = 1.0e4
+    for k, (path, speed) in enumerate(peds):
+        sc.ped_valid[k], sc.ped_num_points[k], sc.ped_speed[k] = True, len(path), speed
+        sc.ped_path[k, : len(path)] = path + np.array([X0, 0.0])
+        sc.ped_size[k] = (0.5, 0.5)
+    env = VecEnv(road, FixedScenarioSpawner([sc]), 1, actions=ContinuousActions(), reward=reward(*RULES))
+    env.reset(0)
+    cols = [env.term_names.index(n) for n in RULES]
+    out, xs = [], []
+    for f in range(steps):
+        a = np.zeros((env.num_agents, 2), np.float32)
+        if accel is not None:
+            a[0, 0] = accel(f)
+        env.step(a)
+        out.append(env.reward_terms[: len(cars)][:, cols].copy())
+        xs.append(float(env.state.x[0]) - X0)
+    return np.array(out), np.array(xs)
+
+
+# -- hand-computed cases -------------------------------------------------------------------
+def test_red_intersection_own_lane_oncoming_lane_and_green(road):
+    # 10 m/s from x = 90.5: the centre crosses the light line x = 100 on step 10 (99.5 -> 100.5)
+    own, _ = drive(road, [(90.5, Y0, 0.0, 10.0)])
+    assert own[9, 0, 0] == -1.0 and own[:, 0, 0].sum() == -1.0  # once, on entering
+    # the oncoming-lane bypass: the line (y in [-3.5, 0]) is never touched, the area is entered
+    # (it reaches 12 m left of the line point), same step
+    bypass, _ = drive(road, [(90.5, Y1, 0.0, 10.0)])
+    assert bypass[9, 0, 0] == -1.0 and bypass[:, 0, 0].sum() == -1.0
+    green, _ = drive(road, [(90.5, Y1, 0.0, 10.0)], light=GREEN)
+    assert green[:, 0, 0].sum() == 0.0
+    # driving west through the area (heading 180 degrees from the approach) is no entry
+    west, _ = drive(road, [(115.5, Y1, np.pi, 10.0)])
+    assert west[:, 0, 0].sum() == 0.0
+
+
+def test_stop_sign_full_stop_rolling_stop_no_stop_and_yield(road):
+    # no stop: crosses x = 50 on step 10 (49.5 -> 50.5) at 10 m/s
+    none, _ = drive(road, [(40.5, Y0, 0.0, 10.0)])
+    assert none[9, 0, 1] == -1.0 and none[:, 0, 1].sum() == -1.0
+    # rolling stop: 1.5 m/s > v_stop = 0.5 m/s all the way, crossing on step 31 (x 49.95 -> 50.1)
+    rolling, x = drive(road, [(45.45, Y0, 0.0, 1.5)], steps=45)
+    assert x[30] > 50.0 > x[29]
+    assert rolling[30, 0, 1] == -1.0 and rolling[:, 0, 1].sum() == -1.0
+    # full stop: starting at rest 4.5 m before the line, 2 m/s^2: stopped at step 1 (0.2 m/s),
+    # crosses 4.5 m of driving later < 8 m + half the length
+    full, x = drive(road, [(45.5, Y0, 0.0, 0.0)], accel=lambda f: 2.0)
+    assert x[-1] > 55.0 and full[:, 0, 1].sum() == 0.0
+    # a stop long before does not count: at rest at x = 20, 30 m of driving to the line
+    early, x = drive(road, [(20.0, Y0, 0.0, 0.0)], steps=55, accel=lambda f: 4.0 if f < 25 else 0.0)
+    assert x[-1] > 55.0 and early[:, 0, 1].sum() == -1.0
+    # YIELD line at x = 150: never penalised (the paper's rule, section 2.1)
+    yld, _ = drive(road, [(140.5, Y0, 0.0, 10.0)])
+    assert yld[:, 0, 1].sum() == 0.0
+
+
+def test_crosswalk_yield_with_and_without_pedestrian(road):
+    # the centre enters the crosswalk (x >= 170) on step 10 (169.5 -> 170.5)
+    on = [(np.array([[171.5, 3.0], [171.5, -3.0]]), 1.0)]  # walking over it the whole time
+    hit, _ = drive(road, [(160.5, Y0, 0.0, 10.0)], peds=on)
+    assert hit[9, 0, 2] == -1.0 and hit[:, 0, 2].sum() == -1.0
+    clear, _ = drive(road, [(160.5, Y0, 0.0, 10.0)])
+    assert clear[:, 0, 2].sum() == 0.0
+    far = [(np.array([[171.5, 30.0], [171.5, 40.0]]), 1.0)]  # walking away, 26.5 m off
+    away, _ = drive(road, [(160.5, Y0, 0.0, 10.0)], peds=far)
+    assert away[:, 0, 2].sum() == 0.0
+
+
+def test_wrong_way_costs_one_per_second(road):
+    wrong, _ = drive(road, [(20.5, Y1, 0.0, 10.0)], steps=10)
+    np.testing.assert_array_equal(wrong[:, 0, 3], np.full(10, -0.1, np.float32))  # -dt per step
+    right, _ = drive(road, [(20.5, Y0, 0.0, 10.0)], steps=10)
+    assert right[:, 0, 3].sum() == 0.0
+    slow, _ = drive(road, [(20.5, Y1, 0.0, 0.8)], steps=10)  # below v_min = 1 m/s
+    assert slow[:, 0, 3].sum() == 0.0
+
+
+# -- kernels against the NumPy references -------------------------------------------------
+def random_rollout(maps, steps, threads=1, worlds=4, seed=3, check=True):
+    """Random driving, mostly ahead (accelerations >= 0, steering within the middle of the
+    table) so cars reach junctions; with `check`, every step's rule columns and stop_sign state
+    equal the NumPy references. Returns the env and how often each term fired."""
+    spawner = PaperSpawner(num_agents=16)
+    env = VecEnv(maps, spawner, worlds, seed=seed, num_threads=threads, reward=reward(*RULES))
+    env.reset(seed)
+    rng = np.random.default_rng(seed)
+    params = {n: get_term(n).params for n in RULES}
+    cols = {n: env.term_names.index(n) for n in RULES}
+    fired = dict.fromkeys(RULES, 0)
+    for _ in range(steps):
+        before = env.state.term_state[:, 0].copy()
+        env.step(np.stack([rng.integers(3, 7, env.num_agents), rng.integers(4, 9, env.num_agents)], axis=1))
+        if not check:
+            continue
+        # the references read `active` as the kernels saw it: the slots that acted this step
+        st = SimpleNamespace(**{**vars(env.state), "active": env.reward_mask.copy()})
+        live = np.repeat(env.state.step != 0, env.agents_per_world) & env.reward_mask
+        ref = {
+            "red_intersection": rule_terms.red_intersection(st, env.maps, params["red_intersection"]),
+            "crosswalk_yield": rule_terms.crosswalk_yield(st, env.maps, params["crosswalk_yield"]),
+            "wrong_way": rule_terms.wrong_way(st, env.maps, params["wrong_way"], env.params.dt),
+        }
+        ref["stop_sign"], new_state = rule_terms.stop_sign(st, env.maps, params["stop_sign"], before)
+        np.testing.assert_array_equal(st.term_state[live, 0], new_state[live])
+        for n in RULES:
+            np.testing.assert_array_equal(env.reward_terms[live, cols[n]], ref[n][live], err_msg=n)
+            fired[n] += int(np.count_nonzero(ref[n][live]))
+    return env, fired
+
+
+def test_kernels_equal_numpy_references_on_random_rollouts(road):
+    """Random driving on the bundled town and on a grid town with lights, crosswalks and a STOP
+    line per road (several maps in one env: per-map tables)."""
+    from selfplaydrive.scenario._testmaps import grid_elements
+
+    el = grid_elements(2, 2, block=80.0)
+    for k, lane in enumerate(el.lanes[:8]):  # STOP lines across the first roads' lanes, mid-block
+        p = lane.centerline
+        mid, d = p.mean(axis=0), (p[-1] - p[0]) / np.linalg.norm(p[-1] - p[0])
+        n = np.array([-d[1], d[0]])
+        el.stop_lines.append(StopLineElement(np.stack([mid - 1.75 * n, mid + 1.75 * n]), StopKind.STOP, [k]))
+    grid = compile_map(el)
+    _, fired = random_rollout([load_map("default"), grid], steps=150)
+    assert fired["red_intersection"] > 0 and fired["wrong_way"] > 0 and fired["stop_sign"] > 0, fired
+
+
+def test_deterministic_at_one_and_two_threads():
+    town = load_map("default")
+    one, _ = random_rollout(town, 80, threads=1, check=False)
+    two, _ = random_rollout(town, 80, threads=2, check=False)
+    for name in ("terms", "term_sum", "term_state", "x", "reward"):
+        np.testing.assert_array_equal(one.buffers[name], two.buffers[name], err_msg=name)
+
+
+def test_state_round_trip_keeps_the_term_state():
+    town = load_map("default")
+    env, _ = random_rollout(town, 40, check=False)
+    assert env.buffers["term_state"].shape == (env.num_agents, 1) and env.buffers["term_state"].any()
+    saved = env.get_state()
+    rng = np.random.default_rng(9)
+    acts = [
+        np.stack([rng.integers(0, 7, env.num_agents), rng.integers(0, 13, env.num_agents)], axis=1)
+        for _ in range(30)
+    ]
+    for a in acts:
+        env.step(a)
+    after = {k: env.buffers[k].copy() for k in ("term_state", "term_sum", "terms")}
+    other = VecEnv(town, PaperSpawner(num_agents=16), env.num_worlds, seed=3, reward=reward(*RULES))
+    other.set_state(saved)
+    np.testing.assert_array_equal(other.buffers["term_state"], saved["buffers.term_state"])
+    for a in acts:
+        other.step(a)
+    for k, v in after.items():
+        np.testing.assert_array_equal(other.buffers[k], v, err_msg=k)
+
+
+# -- the contract ---------------------------------------------------------------------------
+def test_terms_are_off_by_default_and_registered():
+    assert not set(RULES) & set(LinearReward().names)
+    from selfplaydrive.rewards import registered_terms
+
+    assert set(RULES) <= set(registered_terms())
+    with pytest.raises(ConfigError, match="bind"):
+        LinearReward({"wrong_way": 1.0}).plan()
+
+
+def test_bind_lays_out_state_and_packs_tables(road):
+    bound = LinearReward({"stop_sign": 1.0, "wrong_way": 2.0, "red_intersection": 1.0}).bind([road, road])
+    terms = [c.term for c in bound.columns]
+    assert all(isinstance(t, KernelTerm) for t in terms)
+    assert bound.term_state_dim == 1 and terms[0].state_dim == 1 and terms[0].args[0] == 0.0
+    # header: state offset, layout version 1, 2 maps, parameters, 2 body offsets
+    t = terms[1]
+    assert t.args[1] == 1.0 and t.args[2] == 2.0 and t.args[3] == 1.0
+    assert isinstance(t.args, np.ndarray) and t.args.dtype == np.float32 and not t.args.flags.writeable
+    # a second stateful term gets the next column
+    two = LinearReward({"stop_sign": 1.0, "stop2": 1.0}, terms=[_renamed("stop_sign", "stop2")]).bind([road])
+    assert two.term_state_dim == 2 and [c.term.args[0] for c in two.columns] == [0.0, 1.0]
+
+
+def _renamed(name, new):
+    import dataclasses
+
+    return dataclasses.replace(get_term(name), name=new, kernel=name)
+
+
+def test_args_set_parameters_and_bad_args_raise(road):
+    lr = LinearReward({"wrong_way": {"weight": 1.0, "args": [3.0]}})
+    assert lr.columns[0].term.params == (3.0,)
+    with pytest.raises(ConfigError, match="v_min"):
+        LinearReward({"wrong_way": {"weight": 1.0, "args": [3.0, 1.0]}})
+    with pytest.raises(ConfigError, match="state_dim"):
+        KernelTerm("x", 1, (), state_dim=1)
+
+
+def test_packing_refuses_tables_beyond_exact_float32_indices():
+    from selfplaydrive.rewards.rule_tables import pack
+
+    with pytest.raises(ConfigError, match="2\\*\\*24"):
+        pack("big", (), [np.zeros(2**24)])
+
+
+# -- the red-light suite's scripted drivers -------------------------------------------------
+def _suite_sums(town, items, plan):
+    """Outcomes of `plan` on red-light scenarios and each episode's red_intersection sum."""
+    from selfplaydrive.eval.suites import RedLightSuite, run_suite, scripted
+
+    envs = []
+
+    def make(spawner, n):
+        envs.append(VecEnv(town, spawner, n, actions=ContinuousActions(), reward=reward("red_intersection")))
+        return envs[-1]
+
+    trajs = run_suite(make, scripted.ScriptedDriver.factory(scripted.red_light_plans(plan)), items)
+    outcomes = [RedLightSuite().classify(i, t)["outcome"] for i, t in zip(items, trajs, strict=True)]
+    stats = {rec["world"]: rec["terms"]["red_intersection"] for rec in envs[0].pop_episode_stats()}
+    return outcomes, [stats[w] for w in range(len(items))]
+
+
+def test_bypass_through_the_oncoming_lane_pays_and_the_compliant_driver_does_not():
+    """Issue #15 "Done when": the scripted oncoming-lane bypass of the red-light suite, on the
+    bundled town, is classified "bypassed" and pays red_intersection; stopping pays nothing."""
+    from selfplaydrive.eval.suites import RedLightSuite
+
+    town = load_map("default")
+    items = RedLightSuite().generate(town, np.random.default_rng(4), 6)
+    around = [it for it in items if it.info["oncoming_offset_m"] is not None]
+    assert len(around) >= 3
+    outcomes, sums = _suite_sums(town, around, "bypass")
+    assert outcomes == ["bypassed"] * len(around)
+    assert all(s < 0 for s in sums), sums
+    outcomes, sums = _suite_sums(town, items, "comply")
+    assert outcomes == ["stopped"] * len(items) and sums == [0.0] * len(items)
