@@ -16,7 +16,7 @@ With --rules it asks instead whether the reward pays for breaking a rule (paper 
 bypass through the oncoming lane, run it; stop sign: full, rolling, no stop; crosswalk: yield
 or not; wrong way: the bypass) drive the suites' constructed scenarios, and the table gives
 each driver's mean return, per-term returns and the suite's outcomes; a loophole is closed when
-every rule breaker earns strictly less than the compliant driver (docs/rewards.md, "Closing
+every rule breaker earns strictly less than the compliant driver (docs/analyses.md, "Closing
 the loopholes").
 
     python benchmarks/reward_landscape.py --rules                           # the main job
