@@ -8,13 +8,27 @@ competent rule-based driver earns less than a car that stands still, so a policy
 yet learned to steer is pushed towards stopping.
 
     python benchmarks/reward_landscape.py                      # the main job's settings
-    python benchmarks/reward_landscape.py experiment=null      # the paper's reward
-    python benchmarks/reward_landscape.py experiment=null env.params.terminate_threshold=0
+    python benchmarks/reward_landscape.py '~experiment'        # the paper's reward
+    python benchmarks/reward_landscape.py '~experiment' env.params.terminate_threshold=0
+
+With --rules it asks instead whether the reward pays for breaking a rule (paper sections 5.1,
+5.3; selfplaydrive/eval/rule_returns.py): the rule suites' scripted drivers (red light: wait,
+bypass through the oncoming lane, run it; stop sign: full, rolling, no stop; crosswalk: yield
+or not; wrong way: the bypass) drive the suites' constructed scenarios, and the table gives
+each driver's mean return, per-term returns and the suite's outcomes; a loophole is closed when
+every rule breaker earns strictly less than the compliant driver (docs/analyses.md, "Closing
+the loopholes").
+
+    python benchmarks/reward_landscape.py --rules                           # the main job
+    python benchmarks/reward_landscape.py --rules experiment=fix_all        # with the fixes
+    python benchmarks/reward_landscape.py --rules experiment=fix_red_light map=tartu --count 8
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -71,7 +85,13 @@ def main() -> None:
     parser.add_argument("--worlds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=400, help="env steps (0.1 s each)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--rules", action="store_true", help="the rule loopholes' scripted drivers")
+    parser.add_argument("--count", type=int, default=8, help="--rules: scenarios per loophole")
+    parser.add_argument("--loopholes", default=None, help="--rules: comma-separated names (default all)")
     args = parser.parse_args()
+    if args.rules:
+        rules(args)
+        return
     results = run(args.overrides, args.worlds, args.steps, args.seed)
     print(f"overrides: {' '.join(args.overrides) or '(none)'}; {args.worlds} worlds x {args.steps} steps")
     print("| driver | " + " | ".join(SHOWN) + " |")
@@ -82,6 +102,35 @@ def main() -> None:
     print("\nper-term return (mean per agent):")
     for name, s in results.items():
         print(f"  {name:11s} " + ", ".join(f"{k[5:]} {s[k]:+.3f}" for k in terms))
+
+
+def missing_map(cfg) -> str | None:
+    """The map file of `cfg.map` when it is a path that does not exist (the Tartu map lives in
+    ../shared/maps, present only in the project's CI), else None."""
+    spec = str(cfg.map.get("spec", "")) if hasattr(cfg.map, "get") else ""
+    return spec if spec.endswith((".osm", ".xodr", ".xml", ".npz")) and not Path(spec).exists() else None
+
+
+def rules(args) -> None:
+    """--rules: print `rule_returns.compare`'s table for the overrides' reward."""
+    from selfplaydrive.eval import rule_returns
+
+    cfg = compose("train", args.overrides)
+    path = missing_map(cfg)
+    if path is not None:
+        print(f"skipped: map file {path} not present (../shared/maps is only available in the project's CI)")
+        return
+    names = args.loopholes.split(",") if args.loopholes else None
+    results = rule_returns.compare(cfg, names, args.count, args.seed)
+    shown = " ".join(args.overrides) or "(none)"
+    print(f"overrides: {shown}; {args.count} scenarios per loophole, seed {args.seed}")
+    print(rule_returns.table(results))
+    verdict = rule_returns.closed(results)
+    print(
+        "\nclosed (every rule breaker earns less than the compliant driver): "
+        + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in verdict.items())
+    )
+    sys.stdout.flush()
 
 
 if __name__ == "__main__":
