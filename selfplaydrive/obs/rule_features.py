@@ -1,0 +1,170 @@
+"""Traffic-rule features of the road: STOP/YIELD line kinds and crosswalk occupancy (issue #15
+item 1; docs/observation.md "Traffic-rule features").
+
+The one place for the rule's constants and its geometry, shared by the `obs=rules` encoder
+(obs/rules.py, _sim/rules.pyx) and the reward terms that depend on the same state (`stop_sign`,
+`crosswalk_yield`): a crosswalk is *occupied* when a present pedestrian's centre, or its centre
+`CROSSWALK_HORIZON` seconds ahead at its current velocity, lies inside the crosswalk polygon
+grown by `CROSSWALK_MARGIN` metres (inside the polygon, or within the margin of its outline).
+The functions here are the plain NumPy form (float64, written for clarity); the kernel does the
+same arithmetic in C doubles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from selfplaydrive.maps.roadmap import RoadMap, SegmentType, StopKind
+
+CROSSWALK_MARGIN = 0.5  # [m] the crosswalk polygon is grown by this much
+CROSSWALK_HORIZON = 1.5  # [s] a pedestrian "about to enter": centre + velocity * horizon inside
+
+# Road-row values of the `obs=rules` encoder (columns of obs/layout.py ROAD_FEATURES). The paper
+# writes SegmentType / 4 in "type": every stop line is 0.5 (section 2.1 treats them all as yield
+# lines), so YIELD lines keep 0.5 and STOP lines get a value no other type has.
+YIELD_LINE_TYPE = int(SegmentType.STOP_LINE) / 4.0  # 0.5, the paper's value
+STOP_LINE_TYPE = (int(SegmentType.STOP_LINE) + 0.5) / 4.0  # 0.625, between stop 0.5 and light 0.75
+# The "light_state" column is 0 on every segment but a traffic-light line; on a crosswalk
+# segment whose crosswalk is occupied the encoder writes this instead.
+CROSSWALK_OCCUPIED = 1.0
+
+# per atlas position (RuleMapData.seg_code): nothing to mark, a STOP-kind line, else the
+# crosswalk's global index (>= 0)
+CODE_NONE = -1
+CODE_STOP = -2
+
+
+def inside_grown_polygon(x: np.ndarray, y: np.ndarray, polygon: np.ndarray, margin: float) -> np.ndarray:
+    """Whether each point lies inside `polygon` or within `margin` of its outline.
+
+    Args:
+        x, y: (n,) point coordinates [m].
+        polygon: (k, 2) outline [m], open (the last point joins the first), k >= 1.
+        margin: [m] growth of the polygon (>= 0).
+
+    Returns:
+        (n,) bool.
+    """
+    px = np.asarray(x, dtype=np.float64)
+    py = np.asarray(y, dtype=np.float64)
+    poly = np.asarray(polygon, dtype=np.float32).astype(np.float64)
+    inside = np.zeros(px.shape, dtype=bool)
+    near = np.zeros(px.shape, dtype=bool)
+    m2 = float(margin) * float(margin)
+    k = len(poly)
+    for e in range(k):
+        ax, ay = poly[e]
+        bx, by = poly[(e + 1) % k]
+        # crossing number: the edge straddles the point's horizontal line right of the point
+        straddles = (ay > py) != (by > py)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross_x = (bx - ax) * (py - ay) / (by - ay) + ax
+        inside ^= straddles & (px < cross_x)
+        # distance to the edge
+        ex, ey = bx - ax, by - ay
+        ll = ex * ex + ey * ey
+        t = np.zeros(px.shape) if ll <= 0.0 else ((px - ax) * ex + (py - ay) * ey) / ll
+        t = np.clip(t, 0.0, 1.0)
+        dx = px - (ax + t * ex)
+        dy = py - (ay + t * ey)
+        near |= dx * dx + dy * dy <= m2
+    return inside | near
+
+
+def pedestrians_on_crosswalk(
+    polygon: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    margin: float = CROSSWALK_MARGIN,
+    horizon: float = CROSSWALK_HORIZON,
+) -> np.ndarray:
+    """(n,) bool: pedestrian on the crosswalk or about to enter it (the module's rule).
+
+    Args:
+        polygon: (k, 2) crosswalk outline [m] (`RoadMap.crosswalks[c]`).
+        x, y: (n,) pedestrian centres [m] (present pedestrians only).
+        vx, vy: (n,) velocities [m/s].
+        margin: [m] growth of the polygon.
+        horizon: [s] look-ahead of "about to enter".
+    """
+    x64, y64 = np.asarray(x, np.float32).astype(np.float64), np.asarray(y, np.float32).astype(np.float64)
+    vx64, vy64 = np.asarray(vx, np.float32).astype(np.float64), np.asarray(vy, np.float32).astype(np.float64)
+    now = inside_grown_polygon(x64, y64, polygon, margin)
+    ahead = inside_grown_polygon(x64 + vx64 * horizon, y64 + vy64 * horizon, polygon, margin)
+    return now | ahead
+
+
+def crosswalk_polygons(road_map: RoadMap) -> list[np.ndarray]:
+    """The crosswalk outlines of a map, (k, 2) float32 each [m]."""
+    return [np.asarray(road_map.crosswalks[c]) for c in range(len(road_map.crosswalks))]
+
+
+@dataclass(frozen=True)
+class RuleMapData:
+    """The rule features' view of an env's maps, indexed like its atlas (sim/atlas.py).
+
+    Attributes:
+        seg_code: (Ns,) int32 per atlas position: `CODE_STOP` (a STOP-kind stop line),
+            the segment's global crosswalk index (a crosswalk outline), or `CODE_NONE`.
+        map_cw: (M + 1,) int32: crosswalks of map m are global indices [map_cw[m], map_cw[m + 1]).
+        map_stop: (M,) int32 STOP-kind line segments of each map.
+        cw_pts: (C + 1,) int32: outline of crosswalk c is pts[cw_pts[c]:cw_pts[c + 1]].
+        pts: (P, 2) float32 [m] outline points of every crosswalk.
+        cw_box: (C, 4) float32 [m] xmin, ymin, xmax, ymax of each outline, grown by more than
+            the margin (a test that rejects only points certainly outside).
+    """
+
+    seg_code: np.ndarray
+    map_cw: np.ndarray
+    map_stop: np.ndarray
+    cw_pts: np.ndarray
+    pts: np.ndarray
+    cw_box: np.ndarray
+
+
+def rule_map_data(
+    maps: Sequence[RoadMap], atlas: Mapping[str, np.ndarray], margin: float = CROSSWALK_MARGIN
+) -> RuleMapData:
+    """Build `RuleMapData` from an env's maps and its atlas (`build_atlas(maps)`).
+
+    Raises:
+        ValueError: The atlas was not built from these maps (segment counts differ).
+    """
+    sizes = [len(m.segments) for m in maps]
+    ns = int(np.asarray(atlas["seg_rec"]).shape[0])
+    if ns != sum(sizes):
+        raise ValueError(f"atlas: {ns} segments, the maps have {sum(sizes)}: build it from the same maps")
+    seg_base = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    cw_count = [len(m.crosswalks) for m in maps]
+    map_cw = np.concatenate([[0], np.cumsum(cw_count)]).astype(np.int32)
+    code_global = np.full(ns, CODE_NONE, dtype=np.int32)
+    map_stop = np.zeros(len(maps), dtype=np.int32)
+    polys: list[np.ndarray] = []
+    for m, road_map in enumerate(maps):
+        seg = road_map.segments
+        code = np.full(len(seg), CODE_NONE, dtype=np.int32)
+        stop = seg.type == int(SegmentType.STOP_LINE)
+        stop[stop] = road_map.stop_kind[seg.owner[stop]] == int(StopKind.STOP)
+        code[stop] = CODE_STOP
+        walk = seg.type == int(SegmentType.CROSSWALK)
+        code[walk] = seg.owner[walk] + map_cw[m]
+        code_global[seg_base[m] : seg_base[m + 1]] = code
+        map_stop[m] = int(stop.sum())
+        polys += crosswalk_polygons(road_map)
+    seg_id = np.asarray(atlas["seg_id"])[:ns]
+    cw_pts = np.concatenate([[0], np.cumsum([len(p) for p in polys])]).astype(np.int32)
+    pts = np.concatenate(polys).astype(np.float32) if polys else np.zeros((0, 2), np.float32)
+    grow = float(margin) + 0.01  # a little more than the margin: float32 rounding stays inside
+    box = np.zeros((len(polys), 4), dtype=np.float32)
+    box[:, :2], box[:, 2:] = np.inf, -np.inf  # an outline without points holds nothing
+    for c, p in enumerate(polys):
+        if len(p):
+            box[c] = (*(p.min(axis=0) - grow), *(p.max(axis=0) + grow))
+    return RuleMapData(
+        np.ascontiguousarray(code_global[seg_id]), map_cw, map_stop, cw_pts, np.ascontiguousarray(pts), box
+    )
