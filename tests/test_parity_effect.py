@@ -44,6 +44,7 @@ CONTEXTS = {
     ("reward", "eval"): [],
     ("obs", "paper"): [],
     ("obs", "partial"): [],
+    ("obs", "rules"): [],
     ("env", "default"): [],
     ("env/actions", "discrete"): [],
     ("env/actions", "continuous"): [],

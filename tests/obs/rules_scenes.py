@@ -51,8 +51,8 @@ def rules_map():
         PolylineElement(np.array([[-100.0, W], [100.0, W]]), source_id="north"),
     ]
     stops = [
-        StopLineElement(np.array([[20.0, -W], [20.0, 0.0]]), kind=StopKind.STOP, lanes=[0], source_id="stop"),
-        StopLineElement(np.array([[-20.0, 0.0], [-20.0, W]]), kind=StopKind.YIELD, lanes=[1], source_id="yield"),
+        StopLineElement(np.array([[20.0, -W], [20.0, 0.0]]), kind=StopKind.STOP, lanes=[0]),
+        StopLineElement(np.array([[-20.0, 0.0], [-20.0, W]]), kind=StopKind.YIELD, lanes=[1]),
     ]
     walks = [CrosswalkElement(CW_EAST, source_id="cw_e"), CrosswalkElement(CW_WEST, source_id="cw_w")]
     return compile_map(

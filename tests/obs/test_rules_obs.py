@@ -84,7 +84,7 @@ def test_a_pedestrian_on_the_crosswalk_marks_all_its_segments(road):
 @pytest.mark.parametrize(
     ("x0", "x1", "marked"),
     [
-        (44.9, 30.0, True),  # walking west at 1 m/s: 1.9 m off the edge, in 1.5 s 0.4 m off: enters the 0.5 m margin
+        (44.9, 30.0, True),  # walking west at 1 m/s, 1.9 m off the edge: in 1.5 s 0.4 m off (< 0.5)
         (45.5, 30.0, False),  # in 1.5 s at 44.0, 1.0 m off the edge: not about to enter
         (44.0, 60.0, False),  # 1.0 m off the edge, walking away
         (43.4, 60.0, True),  # walking away, but still within 0.5 m of the outline
@@ -241,7 +241,7 @@ def test_the_env_binds_the_encoder_to_its_maps(road):
 
 
 def test_binding_to_an_atlas_of_other_maps_is_refused(road):
-    with pytest.raises(ValueError, match="atlas: .* segments, the maps have"):
+    with pytest.raises(ValueError, match=r"atlas: .* segments, the maps have"):
         RulesEncoder().bind([road], build_atlas([road, road]))
 
 
