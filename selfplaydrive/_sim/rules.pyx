@@ -15,13 +15,15 @@ the NumPy form of the rule: selfplaydrive/obs/rule_features.py; reference of the
 selfplaydrive/testing/rules_reference.py.
 """
 
+from libc.math cimport floor
 from libc.stdint cimport int32_t, int64_t, uintptr_t
+from libc.string cimport memset
 from selfplaydrive._sim.common cimport Sim, Params, Atlas, EGO_DIM, OBJ_DIM, ROAD_DIM
 from selfplaydrive._sim.observe cimport encode_paper
 
 import numpy as np
 
-# obs/rules.py packs the same fields with RULES_HEAD_DTYPE (same order, no padding: 80 bytes),
+# obs/rules.py packs the same fields with RULES_HEAD_DTYPE (same order, no padding: 112 bytes),
 # followed by the arrays at the byte offsets it gives
 ctypedef struct RulesHead:
     int32_t num_positions   # Ns, atlas positions covered by seg_code
@@ -38,6 +40,10 @@ ctypedef struct RulesHead:
     int64_t cw_pts          # (C + 1,) int32 outline of crosswalk c: points [cw_pts[c], cw_pts[c + 1])
     int64_t pts             # (points, 2) float32 [m]
     int64_t cw_box          # (C, 4) float32 [m] grown bounding box
+    int64_t grid_origin     # (M, 3) float32 [m] crosswalk grid of map m: corner x, y, cell edge
+    int64_t grid_dims       # (M, 3) int32 nx, ny, first entry of the map's cells in cell_start
+    int64_t cell_start      # CSR over the cells (nx * ny + 1 entries per map) into cell_items
+    int64_t cell_items      # int32 crosswalks whose grown box meets the cell
 
 cdef enum:
     CODE_STOP = -2
@@ -89,55 +95,71 @@ cdef inline bint in_box(double x, double y, const float* box) noexcept nogil:
     return box[0] <= x <= box[2] and box[1] <= y <= box[3]
 
 
-cdef bint occupied(const RulesHead* h, const void* args, int c, const float* px, const float* py,
-                   const float* vx, const float* vy, const unsigned char* valid,
-                   const unsigned char* here, int n) noexcept nogil:
-    """Crosswalk c holds, now or `horizon` seconds ahead, one of the n pedestrian slots that
-    are valid and present."""
+cdef int mark_point(const RulesHead* h, const void* args, int m, double x, double y, int c0,
+                    float* flags) noexcept nogil:
+    """Flag (flags[c - c0] = 1) every crosswalk c of map m whose grown polygon holds the point;
+    only the crosswalks listed in the point's grid cell are tested. Returns how many it newly
+    flagged."""
+    cdef const float* g = <const float*>at(args, h.grid_origin) + 3 * m
+    cdef const int32_t* d = <const int32_t*>at(args, h.grid_dims) + 3 * m
+    cdef const int32_t* start = <const int32_t*>at(args, h.cell_start)
+    cdef const int32_t* items = <const int32_t*>at(args, h.cell_items)
     cdef const int32_t* cw_pts = <const int32_t*>at(args, h.cw_pts)
-    cdef const float* poly = <const float*>at(args, h.pts) + 2 * cw_pts[c]
-    cdef const float* box = <const float*>at(args, h.cw_box) + 4 * c
-    cdef int k = cw_pts[c + 1] - cw_pts[c], j
-    cdef double m2 = <double>h.margin * <double>h.margin, qx, qy, hz = h.horizon
-    for j in range(n):
-        if not (valid[j] and here[j]):
-            continue
-        if in_box(px[j], py[j], box) and inside_grown(px[j], py[j], poly, k, m2):
-            return True
-        qx = <double>px[j] + <double>vx[j] * hz
-        qy = <double>py[j] + <double>vy[j] * hz
-        if in_box(qx, qy, box) and inside_grown(qx, qy, poly, k, m2):
-            return True
-    return False
+    cdef const float* pts = <const float*>at(args, h.pts)
+    cdef const float* boxes = <const float*>at(args, h.cw_box)
+    cdef double fx = floor((x - <double>g[0]) / <double>g[2])
+    cdef double fy = floor((y - <double>g[1]) / <double>g[2])
+    cdef double m2 = <double>h.margin * <double>h.margin
+    cdef int ix, iy, t, c, n = 0
+    if not (fx >= 0.0 and fx < d[0] and fy >= 0.0 and fy < d[1]):
+        return 0  # outside the grid: no crosswalk's box reaches here
+    ix = <int>fx
+    iy = <int>fy
+    t = d[2] + ix * d[1] + iy
+    for t in range(start[t], start[t + 1]):
+        c = items[t]
+        if flags[c - c0] == 0.0 and in_box(x, y, boxes + 4 * c) and inside_grown(
+                x, y, pts + 2 * cw_pts[c], cw_pts[c + 1] - cw_pts[c], m2):
+            flags[c - c0] = 1.0
+            n += 1
+    return n
 
 
-cdef int crosswalk_flags(const Sim* sim, const RulesHead* h, const void* args, int w, int c0,
-                         int c1, float* flags) noexcept nogil:
-    """flags[c - c0] = 1.0 for each occupied crosswalk c of [c0, c1) in world w, else 0;
-    returns how many are occupied."""
-    cdef int P = sim.P, k, busy = 0, here = 0
-    cdef int64_t j = <int64_t>w * P
-    for k in range(P):
-        here += sim.ped_valid[j + k] and sim.ped_here[j + k]
-    for k in range(c0, c1):
-        flags[k - c0] = 0.0
-        if here and occupied(h, args, k, &sim.ped_x[j], &sim.ped_y[j], &sim.ped_vx[j],
-                             &sim.ped_vy[j], &sim.ped_valid[j], &sim.ped_here[j], P):
-            flags[k - c0] = 1.0
-            busy += 1
+cdef int crosswalk_flags(const Sim* sim, const RulesHead* h, const void* args, int w, int m,
+                         int c0, int c1, float* flags) noexcept nogil:
+    """flags[c - c0] = 1.0 for each occupied crosswalk c of [c0, c1) (map m's) in world w, else
+    0: each present pedestrian's centre and its centre `horizon` seconds ahead are tested
+    against the crosswalks of their grid cells. Returns how many are occupied."""
+    cdef int k, busy = 0
+    cdef int64_t j
+    cdef double hz = h.horizon
+    memset(flags, 0, (c1 - c0) * sizeof(float))
+    for k in range(sim.P):
+        j = <int64_t>w * sim.P + k
+        if sim.ped_valid[j] and sim.ped_here[j]:
+            busy += mark_point(h, args, m, sim.ped_x[j], sim.ped_y[j], c0, flags)
+            busy += mark_point(h, args, m, <double>sim.ped_x[j] + <double>sim.ped_vx[j] * hz,
+                               <double>sim.ped_y[j] + <double>sim.ped_vy[j] * hz, c0, flags)
     return busy
 
 
 cdef void mark_rows(float* o, const int32_t* idx, int n, const int32_t* code, int c0,
-                    const float* flags, float stop_type, float busy_value) noexcept nogil:
-    """Overwrite the rule features of road rows o[0..n) (row k shows atlas position idx[k])."""
+                    const float* flags, bint stops, bint busy, float stop_type,
+                    float busy_value) noexcept nogil:
+    """Overwrite the rule features of road rows o[0..n) (row k shows atlas position idx[k]).
+    Only rows the paper typed stop line (0.5) or crosswalk (1) are looked up (`stops`: the map
+    has STOP lines; `busy`: a crosswalk of the world is occupied)."""
     cdef int k, q
+    cdef float t
     for k in range(n):
-        q = code[idx[k]]
-        if q == CODE_STOP:
-            o[k * ROAD_DIM + TYPE_COL] = stop_type
-        elif q >= 0 and flags[q - c0] != 0.0:
-            o[k * ROAD_DIM + STATE_COL] = busy_value
+        t = o[k * ROAD_DIM + TYPE_COL]
+        if t == 0.5 and stops:
+            if code[idx[k]] == CODE_STOP:
+                o[k * ROAD_DIM + TYPE_COL] = stop_type
+        elif t == 1.0 and busy:
+            q = code[idx[k]]
+            if q >= 0 and flags[q - c0] != 0.0:
+                o[k * ROAD_DIM + STATE_COL] = busy_value
 
 
 cdef void encode_rules(const Sim* sim, const Params* prm, const Atlas* atlas, const void* args,
@@ -146,6 +168,7 @@ cdef void encode_rules(const Sim* sim, const Params* prm, const Atlas* atlas, co
     `w` (an `sd_encoder_fn`). NULL args (an encoder never bound to maps): the paper's rows."""
     cdef const RulesHead* h = <const RulesHead*>args
     cdef int a, i, m, c0, c1, busy
+    cdef bint stops
     cdef const int32_t* code
     cdef const int32_t* map_cw
     cdef float* flags
@@ -158,8 +181,9 @@ cdef void encode_rules(const Sim* sim, const Params* prm, const Atlas* atlas, co
     c1 = map_cw[m + 1]
     # the paper encoder is done with the scratch: it holds one flag per crosswalk of the map now
     flags = (<Sim*>sim).cand_d + <int64_t>w * sim.cand_cap
-    busy = crosswalk_flags(sim, h, args, w, c0, c1, flags)
-    if busy == 0 and (<const int32_t*>at(args, h.map_stop))[m] == 0:
+    busy = crosswalk_flags(sim, h, args, w, m, c0, c1, flags)
+    stops = (<const int32_t*>at(args, h.map_stop))[m] > 0
+    if busy == 0 and not stops:
         return  # nothing to mark in this world (the paper's rows)
     code = <const int32_t*>at(args, h.seg_code)
     for a in range(sim.A):
@@ -167,28 +191,28 @@ cdef void encode_rules(const Sim* sim, const Params* prm, const Atlas* atlas, co
         if sim.active[i]:
             mark_rows(obs + <int64_t>a * stride + EGO_DIM + sim.max_obj * OBJ_DIM,
                       &sim.road_idx[<int64_t>i * sim.max_road], sim.road_n[i], code, c0, flags,
-                      h.stop_type, h.occupied)
+                      stops, busy > 0, h.stop_type, h.occupied)
 
 
 def occupied_flags(const unsigned char[::1] args, int m, const float[::1] x, const float[::1] y,
                    const float[::1] vx, const float[::1] vy):
-    """The kernel's occupancy of every crosswalk of map m for the given present pedestrians
-    (tests compare it with obs/rule_features.py): (crosswalks of m,) bool."""
+    """The kernel's occupancy of every crosswalk of map m for the given present pedestrians, by
+    the same grid and tests as a world's step (tests compare it with obs/rule_features.py):
+    (crosswalks of m,) bool."""
     if args.shape[0] < <Py_ssize_t>sizeof(RulesHead):
         raise ValueError(f"args: expected at least {sizeof(RulesHead)} bytes, got {args.shape[0]}")
     cdef const RulesHead* h = <const RulesHead*>&args[0]
     if not 0 <= m < h.num_maps:
         raise ValueError(f"m: expected a map index in [0, {h.num_maps}), got {m}")
-    cdef int n = x.shape[0], c
+    cdef int n = x.shape[0], j
     if not (y.shape[0] == n and vx.shape[0] == n and vy.shape[0] == n):
         raise ValueError("x, y, vx, vy: expected arrays of one length")
     cdef const int32_t* map_cw = <const int32_t*>at(&args[0], h.map_cw)
-    out = np.zeros(map_cw[m + 1] - map_cw[m], dtype=bool)
-    if n == 0:
-        return out
-    ones = np.ones(n, dtype=np.uint8)
-    cdef const unsigned char[::1] on = ones
-    for c in range(map_cw[m], map_cw[m + 1]):
-        out[c - map_cw[m]] = occupied(h, &args[0], c, &x[0], &y[0], &vx[0], &vy[0], &on[0],
-                                      &on[0], n)
-    return out
+    flags = np.zeros(map_cw[m + 1] - map_cw[m] + 1, dtype=np.float32)
+    cdef float[::1] f = flags
+    cdef double hz = h.horizon
+    for j in range(n):
+        mark_point(h, &args[0], m, x[j], y[j], map_cw[m], &f[0])
+        mark_point(h, &args[0], m, <double>x[j] + <double>vx[j] * hz,
+                   <double>y[j] + <double>vy[j] * hz, map_cw[m], &f[0])
+    return flags[: map_cw[m + 1] - map_cw[m]] != 0.0

@@ -344,7 +344,7 @@ def bind_encoder(encoder: Encoder, maps: Sequence[Any], atlas: Mapping[str, np.n
             f"encoder {encoder.name!r}: bind(maps, atlas) must return an encoder of the same name, "
             f"layout and radius, got {bound!r}"
         )
-    return bound  # type: ignore[no-any-return]
+    return bound
 
 
 # checks ------------------------------------------------------------------------------------

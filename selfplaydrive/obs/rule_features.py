@@ -117,6 +117,13 @@ class RuleMapData:
         pts: (P, 2) float32 [m] outline points of every crosswalk.
         cw_box: (C, 4) float32 [m] xmin, ymin, xmax, ymax of each outline, grown by more than
             the margin (a test that rejects only points certainly outside).
+        grid_origin: (M, 3) float32 [m] lower-left corner and cell edge of each map's
+            crosswalk grid.
+        grid_dims: (M, 3) int32 cells along x and y, and the map's first entry in cell_start.
+        cell_start: CSR over the cells of every map: cell (ix, iy) of map m lists
+            cell_items[cell_start[b + ix * ny + iy] : cell_start[b + ix * ny + iy + 1]], with b
+            = grid_dims[m, 2] (each map's part has nx * ny + 1 entries).
+        cell_items: int32 global crosswalk indices whose grown box meets the cell.
     """
 
     seg_code: np.ndarray
@@ -125,6 +132,10 @@ class RuleMapData:
     cw_pts: np.ndarray
     pts: np.ndarray
     cw_box: np.ndarray
+    grid_origin: np.ndarray
+    grid_dims: np.ndarray
+    cell_start: np.ndarray
+    cell_items: np.ndarray
 
 
 def rule_map_data(
@@ -166,5 +177,61 @@ def rule_map_data(
         if len(p):
             box[c] = (*(p.min(axis=0) - grow), *(p.max(axis=0) + grow))
     return RuleMapData(
-        np.ascontiguousarray(code_global[seg_id]), map_cw, map_stop, cw_pts, np.ascontiguousarray(pts), box
+        np.ascontiguousarray(code_global[seg_id]),
+        map_cw,
+        map_stop,
+        cw_pts,
+        np.ascontiguousarray(pts),
+        box,
+        *crosswalk_grids(box, map_cw, GRID_CELL),
     )
+
+
+GRID_CELL = 10.0  # [m] cell edge of the crosswalk grids (a crosswalk meets a few cells)
+MAX_GRID_CELLS = 1 << 20  # per map; larger maps get larger cells (x2 until they fit)
+
+
+def crosswalk_grids(
+    box: np.ndarray, map_cw: np.ndarray, cell: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per map, a uniform grid listing in each cell the crosswalks whose box meets it (the
+    kernel tests a pedestrian's point against the crosswalks of its cell only). Returns
+    (grid_origin, grid_dims, cell_start, cell_items) as `RuleMapData` describes them; a cell
+    index is floor((x - origin) / cell) in float64, as in the kernel."""
+    M = len(map_cw) - 1
+    origin = np.zeros((M, 3), np.float32)
+    dims = np.zeros((M, 3), np.int32)
+    starts: list[np.ndarray] = []
+    items: list[np.ndarray] = []
+    base = n_items = 0
+    for m in range(M):
+        b = box[map_cw[m] : map_cw[m + 1]].astype(np.float64)
+        b = b[np.isfinite(b).all(axis=1)]
+        lo = b[:, :2].min(axis=0) if len(b) else np.zeros(2)
+        hi = b[:, 2:].max(axis=0) if len(b) else np.zeros(2)
+        size = float(cell)
+        while (int((hi[0] - lo[0]) // size) + 1) * (int((hi[1] - lo[1]) // size) + 1) > MAX_GRID_CELLS:
+            size *= 2.0
+        origin[m] = (lo[0] - 1.0, lo[1] - 1.0, size)  # 1 m below: float32 rounding stays inside
+        o = origin[m].astype(np.float64)
+        nx = int(np.floor((hi[0] - o[0]) / size)) + 1
+        ny = int(np.floor((hi[1] - o[1]) / size)) + 1
+        lists: list[list[int]] = [[] for _ in range(nx * ny)]
+        for c in range(map_cw[m], map_cw[m + 1]):
+            x0, y0, x1, y1 = box[c].astype(np.float64)
+            if not np.isfinite(x0):
+                continue
+            ix0, iy0 = max(int(np.floor((x0 - o[0]) / size)), 0), max(int(np.floor((y0 - o[1]) / size)), 0)
+            ix1 = min(int(np.floor((x1 - o[0]) / size)), nx - 1)
+            iy1 = min(int(np.floor((y1 - o[1]) / size)), ny - 1)
+            for ix in range(ix0, ix1 + 1):
+                for iy in range(iy0, iy1 + 1):
+                    lists[ix * ny + iy].append(c)
+        counts = np.array([len(v) for v in lists], np.int64)
+        starts.append((np.concatenate([[0], np.cumsum(counts)]) + n_items).astype(np.int32))
+        items += [np.asarray(v, np.int32) for v in lists if v]
+        dims[m] = (nx, ny, base)
+        base += nx * ny + 1
+        n_items += int(counts.sum())
+    cell_items = np.concatenate(items).astype(np.int32) if items else np.zeros(0, np.int32)
+    return origin, dims, np.concatenate(starts), cell_items

@@ -28,7 +28,7 @@ from selfplaydrive.obs.config import ObsConfig
 from selfplaydrive.obs.encoders import KernelEncoder, _pack_args
 from selfplaydrive.obs.layout import ObsLayout
 
-# record of RulesHead in _sim/rules.pyx (same order, 80 bytes, no padding); the offsets are
+# record of RulesHead in _sim/rules.pyx (same order, 112 bytes, no padding); the offsets are
 # bytes from the start of the packed args, where each array follows (8-byte aligned)
 RULES_HEAD_DTYPE = np.dtype(
     [
@@ -46,10 +46,17 @@ RULES_HEAD_DTYPE = np.dtype(
         ("cw_pts", np.int64),
         ("pts", np.int64),
         ("cw_box", np.int64),
+        ("grid_origin", np.int64),
+        ("grid_dims", np.int64),
+        ("cell_start", np.int64),
+        ("cell_items", np.int64),
     ],
     align=True,
 )
-ARRAYS = ("seg_code", "map_cw", "map_stop", "cw_pts", "pts", "cw_box")
+ARRAYS = (
+    "seg_code", "map_cw", "map_stop", "cw_pts", "pts", "cw_box", "grid_origin", "grid_dims", "cell_start",
+    "cell_items",
+)
 
 
 class RulesEncoder(KernelEncoder):

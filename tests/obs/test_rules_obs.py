@@ -127,9 +127,9 @@ def test_kernel_occupancy_matches_numpy_on_random_polygons():
     polys = [random_polygon(rng, rng.uniform(-500, 500, 2)) for _ in range(60)]
     cw_pts = np.concatenate([[0], np.cumsum([len(p) for p in polys])]).astype(np.int32)
     box = np.array([[*(p.min(0) - 0.51), *(p.max(0) + 0.51)] for p in polys], np.float32)
-    data = rf.RuleMapData(
-        np.zeros(0, np.int32), np.int32([0, len(polys)]), np.int32([0]), cw_pts, np.concatenate(polys), box
-    )
+    map_cw = np.int32([0, len(polys)])
+    grids = rf.crosswalk_grids(box, map_cw, rf.GRID_CELL)
+    data = rf.RuleMapData(np.zeros(0, np.int32), map_cw, np.int32([0]), cw_pts, np.concatenate(polys), box, *grids)
     args = pack(data)
     hits = 0
     for trial in range(300):
