@@ -54,7 +54,15 @@ RULES_HEAD_DTYPE = np.dtype(
     align=True,
 )
 ARRAYS = (
-    "seg_code", "map_cw", "map_stop", "cw_pts", "pts", "cw_box", "grid_origin", "grid_dims", "cell_start",
+    "seg_code",
+    "map_cw",
+    "map_stop",
+    "cw_pts",
+    "pts",
+    "cw_box",
+    "grid_origin",
+    "grid_dims",
+    "cell_start",
     "cell_items",
 )
 

@@ -129,7 +129,8 @@ def test_kernel_occupancy_matches_numpy_on_random_polygons():
     box = np.array([[*(p.min(0) - 0.51), *(p.max(0) + 0.51)] for p in polys], np.float32)
     map_cw = np.int32([0, len(polys)])
     grids = rf.crosswalk_grids(box, map_cw, rf.GRID_CELL)
-    data = rf.RuleMapData(np.zeros(0, np.int32), map_cw, np.int32([0]), cw_pts, np.concatenate(polys), box, *grids)
+    pts = np.concatenate(polys)
+    data = rf.RuleMapData(np.zeros(0, np.int32), map_cw, np.int32([0]), cw_pts, pts, box, *grids)
     args = pack(data)
     hits = 0
     for trial in range(300):
