@@ -19,7 +19,8 @@ from libc.math cimport floor
 from libc.stdint cimport int32_t, int64_t, uintptr_t
 from libc.string cimport memset
 from selfplaydrive._sim.common cimport Sim, Params, Atlas, EGO_DIM, OBJ_DIM, ROAD_DIM
-from selfplaydrive._sim.observe cimport encode_paper
+from selfplaydrive._sim.observe cimport (encode_paper, body_floats, body_table, write_ego,
+                                         write_objects, write_road)
 
 import numpy as np
 
@@ -143,55 +144,171 @@ cdef int crosswalk_flags(const Sim* sim, const RulesHead* h, const void* args, i
     return busy
 
 
+cdef int busy_list(const float* flags, int c0, int c1, int32_t* ids) noexcept nogil:
+    """The occupied crosswalks (global indices) into ids; returns their number."""
+    cdef int c, n = 0
+    for c in range(c0, c1):
+        if flags[c - c0] != 0.0:
+            ids[n] = c
+            n += 1
+    return n
+
+
+cdef bint sees_busy(const Sim* sim, int i, const float* boxes, const int32_t* ids,
+                    int n) noexcept nogil:
+    """Whether agent i's road gather can hold a segment of one of the n occupied crosswalks
+    `ids`: the gathered midpoints lie within road_r of (road_x, road_y) (_sim/road.pyx), a
+    crosswalk's outline within its grown box."""
+    cdef int k
+    cdef float r = sim.road_r[i] + 0.05, x = sim.road_x[i], y = sim.road_y[i], dx, dy
+    cdef const float* b
+    if sim.road_r[i] < 0.0:
+        return True  # no gather recorded: look at the rows
+    for k in range(n):
+        b = boxes + 4 * ids[k]
+        dx = b[0] - x if x < b[0] else (x - b[2] if x > b[2] else 0.0)
+        dy = b[1] - y if y < b[1] else (y - b[3] if y > b[3] else 0.0)
+        if dx * dx + dy * dy <= r * r:
+            return True
+    return False
+
+
+cdef inline float max4(float a, float b, float c, float d) noexcept nogil:
+    a = a if a > b else b
+    c = c if c > d else d
+    return a if a > c else c
+
+
+cdef inline void mark_row(float* r, int32_t pos, const int32_t* code, int c0, const float* flags,
+                          bint stops, bint busy, float stop_type, float busy_value) noexcept nogil:
+    """Rule features of one road row `r` showing atlas position `pos` (see mark_rows); the
+    code is read only for a stop line or crosswalk row (a random access into a large array)."""
+    cdef float t = r[TYPE_COL]
+    cdef int32_t q
+    if t == 0.5 and stops:
+        if code[pos] == CODE_STOP:
+            r[TYPE_COL] = stop_type
+    elif t == 1.0 and busy:
+        q = code[pos]
+        if q >= 0 and flags[q - c0] != 0.0:
+            r[STATE_COL] = busy_value
+
+
 cdef void mark_rows(float* o, const int32_t* idx, int n, const int32_t* code, int c0,
                     const float* flags, bint stops, bint busy, float stop_type,
                     float busy_value) noexcept nogil:
     """Overwrite the rule features of road rows o[0..n) (row k shows atlas position idx[k]).
-    Only rows the paper typed stop line (0.5) or crosswalk (1) are looked up (`stops`: the map
-    has STOP lines; `busy`: a crosswalk of the world is occupied)."""
-    cdef int k, q
-    cdef float t
-    for k in range(n):
-        t = o[k * ROAD_DIM + TYPE_COL]
-        if t == 0.5 and stops:
-            if code[idx[k]] == CODE_STOP:
-                o[k * ROAD_DIM + TYPE_COL] = stop_type
-        elif t == 1.0 and busy:
-            q = code[idx[k]]
-            if q >= 0 and flags[q - c0] != 0.0:
-                o[k * ROAD_DIM + STATE_COL] = busy_value
+    Only rows the paper typed stop line (0.5) or crosswalk (1) can change (`stops`: the map has
+    STOP lines; `busy`: a crosswalk of the world is occupied): groups of four rows whose types
+    are all below 0.5 (lane centres and edges, most rows) are passed over with one test."""
+    cdef int k = 0, j
+    cdef float* r
+    cdef bint hit
+    while k + 4 <= n:
+        r = o + k * ROAD_DIM + TYPE_COL
+        if busy:
+            hit = max4(r[0], r[ROAD_DIM], r[2 * ROAD_DIM], r[3 * ROAD_DIM]) >= 0.5
+        else:  # only stop lines can change: crosswalk and light rows do not stop the scan
+            hit = ((r[0] == 0.5) | (r[ROAD_DIM] == 0.5) | (r[2 * ROAD_DIM] == 0.5)
+                   | (r[3 * ROAD_DIM] == 0.5))
+        if hit:
+            for j in range(k, k + 4):
+                mark_row(o + j * ROAD_DIM, idx[j], code, c0, flags, stops, busy, stop_type,
+                         busy_value)
+        k += 4
+    for j in range(k, n):
+        mark_row(o + j * ROAD_DIM, idx[j], code, c0, flags, stops, busy, stop_type, busy_value)
 
 
 cdef void encode_rules(const Sim* sim, const Params* prm, const Atlas* atlas, const void* args,
                        int32_t w, float* obs, int32_t stride) noexcept nogil:
     """The paper encoder, then the rule features on the road rows of every active slot of world
-    `w` (an `sd_encoder_fn`). NULL args (an encoder never bound to maps): the paper's rows."""
+    `w` (an `sd_encoder_fn`). NULL args (an encoder never bound to maps): the paper's rows.
+
+    The crosswalk flags go to the end of the world's scratch when the paper's body table leaves
+    room there (the default cand_cap of 8192 floats does): then each agent's road rows are
+    marked right after they are written, while in cache. Otherwise (a small cand_cap) the paper
+    encoder runs first and the flags reuse its scratch; both give the same rows."""
     cdef const RulesHead* h = <const RulesHead*>args
-    cdef int a, i, m, c0, c1, busy
+    cdef int m, c0, c1, busy
     cdef bint stops
-    cdef const int32_t* code
-    cdef const int32_t* map_cw
+    cdef float* scratch = (<Sim*>sim).cand_d + <int64_t>w * sim.cand_cap
     cdef float* flags
-    encode_paper(sim, prm, atlas, NULL, w, obs, stride)
+    cdef int32_t* ids
     if args == NULL or sim.max_road == 0:
+        encode_paper(sim, prm, atlas, NULL, w, obs, stride)
         return
     m = sim.map_id[w]
-    map_cw = <const int32_t*>at(args, h.map_cw)
-    c0 = map_cw[m]
-    c1 = map_cw[m + 1]
-    # the paper encoder is done with the scratch: it holds one flag per crosswalk of the map now
-    flags = (<Sim*>sim).cand_d + <int64_t>w * sim.cand_cap
-    busy = crosswalk_flags(sim, h, args, w, m, c0, c1, flags)
+    c0 = (<const int32_t*>at(args, h.map_cw))[m]
+    c1 = (<const int32_t*>at(args, h.map_cw))[m + 1]
     stops = (<const int32_t*>at(args, h.map_stop))[m] > 0
-    if busy == 0 and not stops:
-        return  # nothing to mark in this world (the paper's rows)
-    code = <const int32_t*>at(args, h.seg_code)
+    if sim.cand_cap - (c1 - c0) >= body_floats(sim.A, sim.S, sim.P):
+        # flags and the list of occupied crosswalks at the ends of the float and int scratch,
+        # past the paper's body table (and its 2 NB + 3 ints of candidates, fewer than that)
+        flags = scratch + sim.cand_cap - (c1 - c0)
+        ids = (<Sim*>sim).cand + <int64_t>w * sim.cand_cap + sim.cand_cap - (c1 - c0)
+        busy = crosswalk_flags(sim, h, args, w, m, c0, c1, flags)
+        if busy == 0 and not stops:
+            encode_paper(sim, prm, atlas, NULL, w, obs, stride)  # nothing to mark in this world
+        else:
+            busy = busy_list(flags, c0, c1, ids)
+            observe_marked(<Sim*>sim, prm, atlas, h, args, w, obs, stride, flags, c0, stops, ids,
+                           busy)
+        return
+    encode_paper(sim, prm, atlas, NULL, w, obs, stride)
+    flags = scratch  # the paper encoder is done with it
+    ids = (<Sim*>sim).cand + <int64_t>w * sim.cand_cap
+    busy = crosswalk_flags(sim, h, args, w, m, c0, c1, flags)
+    if busy > 0 or stops:
+        busy = busy_list(flags, c0, c1, ids)
+        mark_world(sim, h, args, w, obs, stride, flags, c0, stops, ids, busy)
+
+
+cdef void observe_marked(Sim* sim, const Params* prm, const Atlas* atlas, const RulesHead* h,
+                         const void* args, int w, float* obs, int64_t stride, const float* flags,
+                         int c0, bint stops, const int32_t* ids, int nbusy) noexcept nogil:
+    """observe.pyx `observe_world` (the paper's rows, same calls in the same order), marking
+    each agent's road rows right after they are written; an agent's rows are looked at only
+    when the map has STOP lines or an occupied crosswalk is within its gather."""
+    cdef int a, i, nb, own = 0
+    cdef bint busy
+    cdef float* row
+    cdef const float* boxes = <const float*>at(args, h.cw_box)
+    cdef float* table = sim.cand_d + <int64_t>w * sim.cand_cap
+    cdef int32_t* owner = sim.cand + <int64_t>w * sim.cand_cap
+    cdef const int32_t* code = <const int32_t*>at(args, h.seg_code)
+    nb = body_table(sim, prm, w, table, owner)
     for a in range(sim.A):
         i = w * sim.A + a
         if sim.active[i]:
-            mark_rows(obs + <int64_t>a * stride + EGO_DIM + sim.max_obj * OBJ_DIM,
+            row = obs + a * stride
+            write_ego(sim, prm, i, row)
+            write_objects(sim, prm, w, i, own, table, nb, row + EGO_DIM)
+            row += EGO_DIM + sim.max_obj * OBJ_DIM
+            write_road(sim, atlas, prm, w, i, row)
+            busy = nbusy > 0 and sees_busy(sim, i, boxes, ids, nbusy)
+            if stops or busy:
+                mark_rows(row, &sim.road_idx[<int64_t>i * sim.max_road], sim.road_n[i], code,
+                          c0, flags, stops, busy, h.stop_type, h.occupied)
+        own += sim.active[i] or sim.obstacle[i]
+
+
+cdef void mark_world(const Sim* sim, const RulesHead* h, const void* args, int w, float* obs,
+                     int64_t stride, const float* flags, int c0, bint stops, const int32_t* ids,
+                     int nbusy) noexcept nogil:
+    """Mark the road rows of every active slot of world `w`, after the paper encoder (the
+    agents as in observe_marked)."""
+    cdef int a, i
+    cdef bint busy
+    cdef const int32_t* code = <const int32_t*>at(args, h.seg_code)
+    cdef const float* boxes = <const float*>at(args, h.cw_box)
+    for a in range(sim.A):
+        i = w * sim.A + a
+        busy = nbusy > 0 and sim.active[i] and sees_busy(sim, i, boxes, ids, nbusy)
+        if sim.active[i] and (stops or busy):
+            mark_rows(obs + a * stride + EGO_DIM + sim.max_obj * OBJ_DIM,
                       &sim.road_idx[<int64_t>i * sim.max_road], sim.road_n[i], code, c0, flags,
-                      stops, busy > 0, h.stop_type, h.occupied)
+                      stops, busy, h.stop_type, h.occupied)
 
 
 def occupied_flags(const unsigned char[::1] args, int m, const float[::1] x, const float[::1] y,

@@ -21,6 +21,7 @@ from selfplaydrive.obs.rules import pack
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim import VecEnv
 from selfplaydrive.sim.atlas import build_atlas
+from selfplaydrive.sim.params import SimParams
 from selfplaydrive.testing import rules_reference as ref
 from selfplaydrive.testing.check_encoder import check_encoder
 
@@ -186,13 +187,29 @@ class CrosswalkPedestrians:
         return sc
 
 
-@pytest.mark.parametrize("threads", [1, 2])
-def test_env_rows_match_the_reference_on_random_scenes(threads):
+@pytest.mark.parametrize(
+    ("threads", "cand_cap"),
+    [(1, 8192), (2, 8192), (1, 538)],
+    ids=["1-thread", "2-threads", "small-scratch"],
+)
+def test_env_rows_match_the_reference_on_random_scenes(threads, cand_cap):
+    """cand_cap=538: the scratch holds the crosswalk flags of this town (538) and nothing more,
+    so the kernel takes its other path (flags after the paper encoder); the paper env has the
+    same scratch (the road gather depends on it)."""
     town = stop_town()
     envs = [
-        VecEnv(town, CrosswalkPedestrians(many_pedestrians()), 3, obs=enc, seed=5, num_threads=threads)
+        VecEnv(
+            town,
+            CrosswalkPedestrians(many_pedestrians()),
+            3,
+            obs=enc,
+            seed=5,
+            num_threads=threads,
+            params=SimParams(cand_cap=cand_cap),
+        )
         for enc in (PaperEncoder(), RulesEncoder())
     ]
+    assert envs[0].dims.cand_cap == envs[1].dims.cand_cap == max(cand_cap, len(town.crosswalks))
     rng = np.random.default_rng(3)
     for e in envs:
         e.reset(5)
