@@ -24,7 +24,7 @@ from selfplaydrive._sim.observe cimport (encode_paper, body_floats, body_table, 
 
 import numpy as np
 
-# obs/rules.py packs the same fields with RULES_HEAD_DTYPE (same order, no padding: 112 bytes),
+# obs/rules.py packs the same fields with RULES_HEAD_DTYPE (same order, no padding: 136 bytes),
 # followed by the arrays at the byte offsets it gives
 ctypedef struct RulesHead:
     int32_t num_positions   # Ns, atlas positions covered by seg_code
@@ -45,6 +45,9 @@ ctypedef struct RulesHead:
     int64_t grid_dims       # (M, 3) int32 nx, ny, first entry of the map's cells in cell_start
     int64_t cell_start      # CSR over the cells (nx * ny + 1 entries per map) into cell_items
     int64_t cell_items      # int32 crosswalks whose grown box meets the cell
+    int64_t stop_grid       # (M, 3) float32 [m] STOP-line grid of map m: corner x, y, cell edge
+    int64_t stop_dims       # (M, 3) int32 nx, ny, first entry of the map's table in stop_sat
+    int64_t stop_sat        # int32 summed-area tables of STOP-line midpoints per cell
 
 cdef enum:
     CODE_STOP = -2
@@ -173,6 +176,39 @@ cdef bint sees_busy(const Sim* sim, int i, const float* boxes, const int32_t* id
     return False
 
 
+cdef inline int clampi(double v, int hi) noexcept nogil:
+    """floor(v) clamped to [0, hi]."""
+    if v <= 0.0:
+        return 0
+    if v >= hi:
+        return hi
+    return <int>floor(v)
+
+
+cdef bint sees_stop(const Sim* sim, const RulesHead* h, const void* args, int m,
+                    int i) noexcept nogil:
+    """Whether a STOP-line segment midpoint of map m lies in the square of cells around agent
+    i's gather disc (road_r around (road_x, road_y), _sim/road.pyx): four reads of the map's
+    summed-area table. The gathered midpoints lie in that disc, so False means none is a STOP
+    line."""
+    cdef const float* g = <const float*>at(args, h.stop_grid) + 3 * m
+    cdef const int32_t* d = <const int32_t*>at(args, h.stop_dims) + 3 * m
+    cdef const int32_t* sat = <const int32_t*>at(args, h.stop_sat) + d[2]
+    cdef double r = <double>sim.road_r[i] + 0.05, x = sim.road_x[i], y = sim.road_y[i]
+    cdef double c = g[2]
+    cdef int x0, x1, y0, y1, ny1 = d[1] + 1
+    if sim.road_r[i] < 0.0:
+        return True  # no gather recorded: look at the rows
+    # cells [x0, x1) x [y0, y1) cover the square (clamped to the grid)
+    x0 = clampi(floor((x - r - g[0]) / c), d[0])
+    x1 = clampi(floor((x + r - g[0]) / c) + 1.0, d[0])
+    y0 = clampi(floor((y - r - g[1]) / c), d[1])
+    y1 = clampi(floor((y + r - g[1]) / c) + 1.0, d[1])
+    if x1 <= x0 or y1 <= y0:
+        return False
+    return sat[x1 * ny1 + y1] - sat[x0 * ny1 + y1] - sat[x1 * ny1 + y0] + sat[x0 * ny1 + y0] > 0
+
+
 cdef inline float max4(float a, float b, float c, float d) noexcept nogil:
     a = a if a > b else b
     c = c if c > d else d
@@ -271,7 +307,7 @@ cdef void observe_marked(Sim* sim, const Params* prm, const Atlas* atlas, const 
     each agent's road rows right after they are written; an agent's rows are looked at only
     when the map has STOP lines or an occupied crosswalk is within its gather."""
     cdef int a, i, nb, own = 0
-    cdef bint busy
+    cdef bint busy, stop
     cdef float* row
     cdef const float* boxes = <const float*>at(args, h.cw_box)
     cdef float* table = sim.cand_d + <int64_t>w * sim.cand_cap
@@ -287,9 +323,10 @@ cdef void observe_marked(Sim* sim, const Params* prm, const Atlas* atlas, const 
             row += EGO_DIM + sim.max_obj * OBJ_DIM
             write_road(sim, atlas, prm, w, i, row)
             busy = nbusy > 0 and sees_busy(sim, i, boxes, ids, nbusy)
-            if stops or busy:
+            stop = stops and sees_stop(sim, h, args, sim.map_id[w], i)
+            if stop or busy:
                 mark_rows(row, &sim.road_idx[<int64_t>i * sim.max_road], sim.road_n[i], code,
-                          c0, flags, stops, busy, h.stop_type, h.occupied)
+                          c0, flags, stop, busy, h.stop_type, h.occupied)
         own += sim.active[i] or sim.obstacle[i]
 
 
@@ -299,16 +336,19 @@ cdef void mark_world(const Sim* sim, const RulesHead* h, const void* args, int w
     """Mark the road rows of every active slot of world `w`, after the paper encoder (the
     agents as in observe_marked)."""
     cdef int a, i
-    cdef bint busy
+    cdef bint busy, stop
     cdef const int32_t* code = <const int32_t*>at(args, h.seg_code)
     cdef const float* boxes = <const float*>at(args, h.cw_box)
     for a in range(sim.A):
         i = w * sim.A + a
-        busy = nbusy > 0 and sim.active[i] and sees_busy(sim, i, boxes, ids, nbusy)
-        if sim.active[i] and (stops or busy):
+        if not sim.active[i]:
+            continue
+        busy = nbusy > 0 and sees_busy(sim, i, boxes, ids, nbusy)
+        stop = stops and sees_stop(sim, h, args, sim.map_id[w], i)
+        if stop or busy:
             mark_rows(obs + a * stride + EGO_DIM + sim.max_obj * OBJ_DIM,
                       &sim.road_idx[<int64_t>i * sim.max_road], sim.road_n[i], code, c0, flags,
-                      stops, busy, h.stop_type, h.occupied)
+                      stop, busy, h.stop_type, h.occupied)
 
 
 def occupied_flags(const unsigned char[::1] args, int m, const float[::1] x, const float[::1] y,

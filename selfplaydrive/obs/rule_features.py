@@ -124,6 +124,12 @@ class RuleMapData:
             cell_items[cell_start[b + ix * ny + iy] : cell_start[b + ix * ny + iy + 1]], with b
             = grid_dims[m, 2] (each map's part has nx * ny + 1 entries).
         cell_items: int32 global crosswalk indices whose grown box meets the cell.
+        stop_grid: (M, 3) float32 [m] lower-left corner and cell edge of each map's grid of
+            STOP-line segment midpoints.
+        stop_dims: (M, 3) int32 cells along x and y, and the map's first entry in stop_sat.
+        stop_sat: int32 summed-area tables of STOP-line midpoints per cell, (nx + 1) * (ny + 1)
+            entries per map: entry (i, j) counts the midpoints in cells [0, i) x [0, j) (a
+            rectangle of cells is counted with four reads).
     """
 
     seg_code: np.ndarray
@@ -136,6 +142,9 @@ class RuleMapData:
     grid_dims: np.ndarray
     cell_start: np.ndarray
     cell_items: np.ndarray
+    stop_grid: np.ndarray
+    stop_dims: np.ndarray
+    stop_sat: np.ndarray
 
 
 def rule_map_data(
@@ -184,6 +193,7 @@ def rule_map_data(
         np.ascontiguousarray(pts),
         box,
         *crosswalk_grids(box, map_cw, GRID_CELL),
+        *stop_tables(code_global, seg_base, np.asarray(atlas["seg_rec"])[:, :2], seg_id, STOP_CELL),
     )
 
 
@@ -235,3 +245,45 @@ def crosswalk_grids(
         n_items += int(counts.sum())
     cell_items = np.concatenate(items).astype(np.int32) if items else np.zeros(0, np.int32)
     return origin, dims, np.concatenate(starts), cell_items
+
+
+STOP_CELL = 20.0  # [m] cell edge of the STOP-line count grids
+
+
+def stop_tables(
+    code: np.ndarray, seg_base: np.ndarray, mid: np.ndarray, seg_id: np.ndarray, cell: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per map, a grid of cells counting STOP-line segment midpoints, as a summed-area table:
+    the kernel asks "any STOP line in this square?" with four reads, to pass over the rows of
+    agents that see none. `code`: per global segment (CODE_STOP or not); `mid`: the atlas's
+    midpoints (atlas order, `seg_id` their global indices). Returns (stop_grid, stop_dims,
+    stop_sat) as `RuleMapData` describes them."""
+    M = len(seg_base) - 1
+    grid = np.zeros((M, 3), np.float32)
+    dims = np.zeros((M, 3), np.int32)
+    sats: list[np.ndarray] = []
+    base = 0
+    for m in range(M):
+        pos = np.flatnonzero((seg_id >= seg_base[m]) & (seg_id < seg_base[m + 1]))
+        pos = pos[code[seg_id[pos]] == CODE_STOP]
+        p = mid[pos].astype(np.float64)
+        lo = p.min(axis=0) if len(p) else np.zeros(2)
+        hi = p.max(axis=0) if len(p) else np.zeros(2)
+        size = float(cell)
+        while (int((hi[0] - lo[0]) // size) + 2) * (int((hi[1] - lo[1]) // size) + 2) > MAX_GRID_CELLS:
+            size *= 2.0
+        grid[m] = (lo[0] - 1.0, lo[1] - 1.0, size)  # 1 m below: float32 rounding stays inside
+        o = grid[m].astype(np.float64)
+        nx = int(np.floor((hi[0] - o[0]) / size)) + 1
+        ny = int(np.floor((hi[1] - o[1]) / size)) + 1
+        counts = np.zeros((nx, ny), np.int64)
+        if len(p):
+            ix = np.floor((p[:, 0] - o[0]) / size).astype(np.int64)
+            iy = np.floor((p[:, 1] - o[1]) / size).astype(np.int64)
+            np.add.at(counts, (ix, iy), 1)
+        sat = np.zeros((nx + 1, ny + 1), np.int64)
+        sat[1:, 1:] = counts.cumsum(axis=0).cumsum(axis=1)
+        sats.append(sat.astype(np.int32).ravel())
+        dims[m] = (nx, ny, base)
+        base += (nx + 1) * (ny + 1)
+    return grid, dims, np.concatenate(sats)

@@ -28,7 +28,7 @@ from selfplaydrive.obs.config import ObsConfig
 from selfplaydrive.obs.encoders import KernelEncoder, _pack_args
 from selfplaydrive.obs.layout import ObsLayout
 
-# record of RulesHead in _sim/rules.pyx (same order, 112 bytes, no padding); the offsets are
+# record of RulesHead in _sim/rules.pyx (same order, 136 bytes, no padding); the offsets are
 # bytes from the start of the packed args, where each array follows (8-byte aligned)
 RULES_HEAD_DTYPE = np.dtype(
     [
@@ -50,6 +50,9 @@ RULES_HEAD_DTYPE = np.dtype(
         ("grid_dims", np.int64),
         ("cell_start", np.int64),
         ("cell_items", np.int64),
+        ("stop_grid", np.int64),
+        ("stop_dims", np.int64),
+        ("stop_sat", np.int64),
     ],
     align=True,
 )
@@ -63,7 +66,7 @@ ARRAYS = (
     "grid_origin",
     "grid_dims",
     "cell_start",
-    "cell_items",
+    "cell_items", "stop_grid", "stop_dims", "stop_sat",
 )
 
 

@@ -131,7 +131,10 @@ def test_kernel_occupancy_matches_numpy_on_random_polygons():
     map_cw = np.int32([0, len(polys)])
     grids = rf.crosswalk_grids(box, map_cw, rf.GRID_CELL)
     pts = np.concatenate(polys)
-    data = rf.RuleMapData(np.zeros(0, np.int32), map_cw, np.int32([0]), cw_pts, pts, box, *grids)
+    no_stops = rf.stop_tables(
+        np.zeros(0, np.int32), np.int64([0, 0]), np.zeros((0, 2)), np.zeros(0, np.int32), 20.0
+    )
+    data = rf.RuleMapData(np.zeros(0, np.int32), map_cw, np.int32([0]), cw_pts, pts, box, *grids, *no_stops)
     args = pack(data)
     hits = 0
     for trial in range(300):
