@@ -50,6 +50,7 @@ ctypedef struct RulesHead:
     int64_t stop_sat        # int32 summed-area tables of STOP-line midpoints per cell
 
 cdef enum:
+    HALF_BITS = 0x3F000000  # 0.5f, the paper's stop-line type
     CODE_STOP = -2
     TYPE_COL = 6    # columns of a road row (obs/layout.py ROAD_FEATURES)
     STATE_COL = 7
@@ -239,14 +240,17 @@ cdef void mark_rows(float* o, const int32_t* idx, int n, const int32_t* code, in
     are all below 0.5 (lane centres and edges, most rows) are passed over with one test."""
     cdef int k = 0, j
     cdef float* r
+    cdef const int32_t* b
     cdef bint hit
     while k + 4 <= n:
         r = o + k * ROAD_DIM + TYPE_COL
         if busy:
             hit = max4(r[0], r[ROAD_DIM], r[2 * ROAD_DIM], r[3 * ROAD_DIM]) >= 0.5
         else:  # only stop lines can change: crosswalk and light rows do not stop the scan
-            hit = ((r[0] == 0.5) | (r[ROAD_DIM] == 0.5) | (r[2 * ROAD_DIM] == 0.5)
-                   | (r[3 * ROAD_DIM] == 0.5))
+            # (compared as bit patterns: one integer compare per row, no unordered case)
+            b = <const int32_t*>r
+            hit = ((b[0] == HALF_BITS) | (b[ROAD_DIM] == HALF_BITS) | (b[2 * ROAD_DIM] == HALF_BITS)
+                   | (b[3 * ROAD_DIM] == HALF_BITS))
         if hit:
             for j in range(k, k + 4):
                 mark_row(o + j * ROAD_DIM, idx[j], code, c0, flags, stops, busy, stop_type,
