@@ -66,7 +66,10 @@ ARRAYS = (
     "grid_origin",
     "grid_dims",
     "cell_start",
-    "cell_items", "stop_grid", "stop_dims", "stop_sat",
+    "cell_items",
+    "stop_grid",
+    "stop_dims",
+    "stop_sat",
 )
 
 
@@ -130,14 +133,12 @@ def pack(data: rf.RuleMapData) -> np.ndarray:
     head["horizon"] = rf.CROSSWALK_HORIZON
     head["stop_type"] = rf.STOP_LINE_TYPE
     head["occupied"] = rf.CROSSWALK_OCCUPIED
-    parts = [head.view(np.uint8)]
+    parts = []
     offset = RULES_HEAD_DTYPE.itemsize
     for name in ARRAYS:
         raw = np.ascontiguousarray(getattr(data, name)).view(np.uint8).ravel()
         head[name] = offset
-        parts.append(raw)
         pad = -len(raw) % 8
-        parts.append(np.zeros(pad, dtype=np.uint8))
+        parts += [raw, np.zeros(pad, dtype=np.uint8)]
         offset += len(raw) + pad
-    parts[0] = head.view(np.uint8)
-    return np.concatenate(parts)
+    return np.concatenate([head.view(np.uint8), *parts])

@@ -251,6 +251,18 @@ def test_the_shipped_checker_passes():
     assert report.rows_checked > 0 and report.isolation_checks > 0 and report.max_abs <= 1.0
 
 
+def test_a_map_without_stop_lines_or_crosswalks_gives_the_paper_rows(straight_map):
+    spawner = SceneSpawner()
+    envs = [VecEnv(straight_map, spawner, 2, obs=enc, seed=1) for enc in (PaperEncoder(), RulesEncoder())]
+    assert envs[1].encoder.scratch == 0
+    for e in envs:
+        e.reset(1)
+    for _ in range(5):
+        for e in envs:
+            e.step(np.full((e.num_agents, 2), (3, 6)))
+        np.testing.assert_array_equal(envs[0].observations, envs[1].observations)
+
+
 # --- binding -------------------------------------------------------------------------------------
 def test_the_env_binds_the_encoder_to_its_maps(road):
     enc = RulesEncoder()
