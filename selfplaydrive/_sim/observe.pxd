@@ -11,7 +11,7 @@ cdef void encode_paper(const Sim* sim, const Params* prm, const Atlas* atlas, co
                        int32_t w, float* obs, int32_t stride) noexcept nogil
 
 # The per-agent pieces of observe_world, for encoders that extend the paper's rows agent by agent
-# while they are hot in cache (_sim/rules.pyx): the world's body table in its scratch, then ego,
+# while they are hot in cache (_sim/obs_rules.pyx): the world's body table in its scratch, then ego,
 # object and road rows of slot i. `body_floats`: floats of cand_d the body table uses.
 cdef int body_floats(int A, int S, int P) noexcept nogil
 cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner) noexcept nogil

@@ -2,7 +2,7 @@
 item 1; docs/observation.md "Traffic-rule features").
 
 The one place for the rule's constants and its geometry, shared by the `obs=rules` encoder
-(obs/rules.py, _sim/rules.pyx) and the reward terms that depend on the same state (`stop_sign`,
+(obs/rules.py, _sim/obs_rules.pyx) and the reward terms that depend on the same state (`stop_sign`,
 `crosswalk_yield`): a crosswalk is *occupied* when a present pedestrian's centre, or its centre
 `CROSSWALK_HORIZON` seconds ahead at its current velocity, lies inside the crosswalk polygon
 grown by `CROSSWALK_MARGIN` metres (inside the polygon, or within the margin of its outline).

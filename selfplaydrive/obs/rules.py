@@ -28,7 +28,7 @@ from selfplaydrive.obs.config import ObsConfig
 from selfplaydrive.obs.encoders import KernelEncoder, _pack_args
 from selfplaydrive.obs.layout import ObsLayout
 
-# record of RulesHead in _sim/rules.pyx (same order, 136 bytes, no padding); the offsets are
+# record of RulesHead in _sim/obs_rules.pyx (same order, 136 bytes, no padding); the offsets are
 # bytes from the start of the packed args, where each array follows (8-byte aligned)
 RULES_HEAD_DTYPE = np.dtype(
     [
@@ -87,10 +87,10 @@ class RulesEncoder(KernelEncoder):
 
     def __init__(self, max_objects: int = 63, max_road: int = 200, radius: float = 100.0) -> None:
         cfg = ObsConfig(max_objects, max_road, radius)
-        from selfplaydrive._sim import rules
+        from selfplaydrive._sim import obs_rules as rules
 
         if rules.head_size() != RULES_HEAD_DTYPE.itemsize:  # pragma: no cover - build mismatch
-            raise RuntimeError("RulesHead of _sim/rules.pyx and RULES_HEAD_DTYPE differ: rebuild")
+            raise RuntimeError("RulesHead of _sim/obs_rules.pyx and RULES_HEAD_DTYPE differ: rebuild")
         super().__init__(
             "rules",
             int(rules.encoder_address()),

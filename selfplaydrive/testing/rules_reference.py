@@ -1,4 +1,4 @@
-"""Plain NumPy reference of the traffic-rule encoder (_sim/rules.pyx; issue #15 item 1;
+"""Plain NumPy reference of the traffic-rule encoder (_sim/obs_rules.pyx; issue #15 item 1;
 docs/observation.md "Traffic-rule features"), for tests: the paper's rows of an env, then the
 rule features, found from the `RoadMap`s themselves (segment type, owner and `stop_kind`, the
 crosswalk outlines) rather than from the packed data the kernel reads, in explicit loops.

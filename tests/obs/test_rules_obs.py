@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from rules_scenes import CW_EAST, STOP_MID, YIELD_MID, SceneSpawner, rules_map
 
-from selfplaydrive._sim import rules as kernel
+from selfplaydrive._sim import obs_rules as kernel
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.obs import PaperEncoder, RulesEncoder, bind_encoder

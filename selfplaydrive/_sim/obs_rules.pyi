@@ -1,4 +1,4 @@
-"""Type stub of the Cython module `selfplaydrive._sim.rules` (only its Python-visible names)."""
+"""Type stub of the Cython module `selfplaydrive._sim.obs_rules` (only its Python-visible names)."""
 
 from typing import Any
 
