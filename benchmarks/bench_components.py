@@ -21,12 +21,16 @@ terms      The cost of one extra term column in each form: a built-in term of si
 encoders   The observation stage per agent-step of each observation encoder (paper, partial
            observability off / occlusion / every effect, the ego + nearest-objects encoder of
            example 09 as numba cfunc and Cython package), `VecEnv(profile=True)`, alternated.
+rules      The traffic-rule encoder (obs=rules) against the paper's, alternated: on the bundled
+           town as shipped (every stop line a YIELD line: only occupied crosswalks are marked)
+           and with every other stop line made a STOP line (the rows are walked in every world).
 
 Usage:
     python benchmarks/bench_components.py overhead --baseline /tmp/base [--rounds 6] [--stage physics]
         [--json]
     python benchmarks/bench_components.py terms [--rounds 5] [--json]
     python benchmarks/bench_components.py encoders [--rounds 5] [--json]
+    python benchmarks/bench_components.py rules [--rounds 5] [--json]
 Run pinned (taskset -c 0) on an otherwise idle machine; both default to one thread.
 """
 
@@ -309,6 +313,44 @@ def encoders(args: argparse.Namespace) -> dict[str, object]:
     return out
 
 
+def rules(args: argparse.Namespace) -> dict[str, object]:
+    """Observation stage and whole step per agent-step of `RulesEncoder` vs `PaperEncoder`,
+    alternated over `args.rounds` (paper, rules, rules on the town with STOP lines, paper on it)."""
+    import dataclasses
+
+    from selfplaydrive.maps.loader import load_map
+    from selfplaydrive.obs import PaperEncoder, RulesEncoder
+
+    town = load_map("default")
+    kinds = np.zeros(len(town.stop_kind), np.int8)
+    kinds[1::2] = 1  # StopKind.YIELD; the even ones STOP
+    stops = dataclasses.replace(town, stop_kind=kinds)
+    variants = {
+        "paper": (town, PaperEncoder()),
+        "rules": (town, RulesEncoder()),
+        "paper_stop_town": (stops, PaperEncoder()),
+        "rules_stop_town": (stops, RulesEncoder()),
+    }
+    stage: dict[str, list[float]] = {k: [] for k in variants}
+    step: dict[str, list[float]] = {k: [] for k in variants}
+    for r in range(args.rounds):
+        order = list(variants) if r % 2 == 0 else list(reversed(variants))  # ABBA
+        for name in order:
+            s, w = _time_encoder(*variants[name], args)
+            stage[name].append(s)
+            step[name].append(w)
+    out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
+    for name in variants:
+        base = "paper_stop_town" if name.endswith("stop_town") else "paper"
+        out[name] = {
+            "observation_stage_ns": statistics.median(stage[name]),
+            "step_ns": statistics.median(step[name]),
+            "stage_vs_paper_per_round": [a / b for a, b in zip(stage[name], stage[base], strict=True)],
+            "step_vs_paper_per_round": [a / b for a, b in zip(step[name], step[base], strict=True)],
+        }
+    return out
+
+
 def _print(title: str, result: dict[str, object], as_json: bool) -> None:
     if as_json:
         print(json.dumps(result, indent=1))
@@ -320,7 +362,7 @@ def _print(title: str, result: dict[str, object], as_json: bool) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("what", choices=("overhead", "terms", "encoders"))
+    p.add_argument("what", choices=("overhead", "terms", "encoders", "rules"))
     p.add_argument("--baseline", help="folder holding the baseline's built selfplaydrive package (overhead)")
     p.add_argument("--worlds", type=int, default=32, help="worlds (32 agent slots each)")
     p.add_argument("--threads", type=int, default=1)
@@ -341,6 +383,8 @@ def main(argv: list[str] | None = None) -> None:
         _print("overhead (paper configuration, this tree vs baseline)", overhead(args), args.json)
     elif args.what == "encoders":
         _print("observation stage per encoder", encoders(args), args.json)
+    elif args.what == "rules":
+        _print("obs=rules vs obs=paper (per agent-step)", rules(args), args.json)
     else:
         _print("cost of one extra reward column per form", terms(args), args.json)
 

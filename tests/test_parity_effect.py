@@ -46,6 +46,7 @@ CONTEXTS = {
     ("obs", "paper"): [],
     ("obs", "partial"): [],
     ("obs", "custom"): ["obs.target=selfplaydrive.obs:PaperEncoder"],
+    ("obs", "rules"): [],
     ("env", "default"): [],
     ("env/actions", "discrete"): [],
     ("env/actions", "continuous"): [],

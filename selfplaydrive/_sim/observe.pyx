@@ -118,7 +118,13 @@ def body_scratch(int A, int S, int P):
     records, NB distances, x and y of pad4(NB) floats each; write_objects: NB owners and up
     to NB + 3 candidates), for A agents, S statics and P pedestrians (NB = A + S + P)."""
     cdef int NB = A + S + P
-    return max(9 * NB + 2 * pad4(NB), 2 * NB + 3)
+    return max(body_floats(A, S, P), 2 * NB + 3)
+
+
+cdef int body_floats(int A, int S, int P) noexcept nogil:
+    """Floats of cand_d the body table and the object distances use (see body_scratch)."""
+    cdef int NB = A + S + P
+    return 9 * NB + 2 * pad4(NB)
 
 
 cdef int body_table(Sim* sim, const Params* prm, int w, float* t, int32_t* owner) noexcept nogil:

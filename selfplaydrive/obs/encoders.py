@@ -18,7 +18,7 @@ Python observation hooks (`ObsHook`) still append columns after the encoder's.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any, Protocol, runtime_checkable
@@ -317,6 +317,34 @@ def as_encoder(obs: object) -> Encoder:
         "obs: expected an ObsConfig, a KernelEncoder (PaperEncoder, PartialObsEncoder, from_numba, "
         f"from_cython) or a Python encoder (name, layout, radius, __call__(state)), got {type(obs).__name__}"
     )
+
+
+def bind_encoder(encoder: Encoder, maps: Sequence[Any], atlas: Mapping[str, np.ndarray]) -> Encoder:
+    """The encoder an env runs: ``encoder.bind(maps, atlas)`` when the encoder defines ``bind``
+    (one whose rows depend on map data the atlas does not carry, e.g. `RulesEncoder`: which
+    segments are STOP lines), else the encoder itself. `VecEnv` calls it once, when it is
+    constructed, with its maps and `build_atlas(maps)` (sim/atlas.py: the atlas positions the
+    road gather writes to `road_idx`); the bound encoder must keep the name, layout and radius.
+
+    Raises:
+        ConfigError: ``bind`` returned something else than an encoder of the same layout.
+    """
+    bind = getattr(encoder, "bind", None)
+    if not callable(bind):
+        return encoder
+    bound = bind(maps, atlas)
+    same = (
+        getattr(bound, "name", None) == encoder.name
+        and getattr(bound, "layout", None) == encoder.layout
+        and getattr(bound, "radius", None) == encoder.radius
+        and isinstance(bound, KernelEncoder) == isinstance(encoder, KernelEncoder)
+    )
+    if not same:
+        raise ConfigError(
+            f"encoder {encoder.name!r}: bind(maps, atlas) must return an encoder of the same name, "
+            f"layout and radius, got {bound!r}"
+        )
+    return bound
 
 
 # checks ------------------------------------------------------------------------------------

@@ -37,6 +37,7 @@ from selfplaydrive.maps.rule_geometry import (
     controlled_area,
     controlled_zones,
 )
+from selfplaydrive.obs.rule_features import CROSSWALK_HORIZON, CROSSWALK_MARGIN
 from selfplaydrive.rewards.components import KernelTerm
 from selfplaydrive.rewards.rule_tables import CELL, REACH, grid_body, pack
 
@@ -198,7 +199,8 @@ RULE_TERMS = (
     ),
     RuleTerm(
         "crosswalk_yield",
-        (1.5, 1.0),
+        # the same "about to enter" rule as the observation's crosswalk state (obs=rules)
+        (CROSSWALK_HORIZON, CROSSWALK_MARGIN),
         ("t_ahead [s]", "margin [m]"),
         crosswalk_records,
         doc="R = -1 on entering a crosswalk a pedestrian is on or reaches within 1.5 s",

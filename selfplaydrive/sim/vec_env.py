@@ -34,7 +34,7 @@ from selfplaydrive._sim.world import STAGES, World, copy_discrete
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.obs.config import ObsConfig, ObsHook
-from selfplaydrive.obs.encoders import Encoder, KernelEncoder, as_encoder
+from selfplaydrive.obs.encoders import Encoder, KernelEncoder, as_encoder, bind_encoder
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.physics.components import PhysicsModel
 from selfplaydrive.physics.models import FrictionBicycleModel
@@ -142,7 +142,10 @@ class VecEnv:
         # --- end physics component
         self.params = params if params is not None else SimParams()
         # ---- observation encoder (issue #13) ----
-        self.encoder = as_encoder(obs)
+        # the read-only road data of the maps, shared by all worlds; an encoder that needs map
+        # data of its own takes it from the maps and the atlas here (obs/encoders.py bind_encoder)
+        self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
+        self.encoder = bind_encoder(as_encoder(obs), self.maps, self.atlas)
         self._kernel_encoder = isinstance(self.encoder, KernelEncoder)
         enc_layout = self.encoder.layout
         road_gather = (
@@ -194,7 +197,6 @@ class VecEnv:
         _check_memory(self.dims)
         self._world_rngs += [np.random.default_rng(int(s)) for s in seeds[1:]]
         self.buffers = allocate(self.dims)
-        self.atlas = build_atlas(self.maps, length_scale=self.params.length_scale)
         self._world = World(
             self.dims.__dict__,
             self.buffers,

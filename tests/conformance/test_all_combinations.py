@@ -15,6 +15,8 @@ combination that flips every axis; the full product is marked slow:
 
 The shipped component checkers (selfplaydrive.testing: `check_spawner`, `check_reward_term`) run
 over spawner x physics model x reward term (a compiled built-in, a Python and a numba term).
+Every shipped observation encoder (`obs=...`) runs the encoder checker (`check_encoder`) and the
+single-agent and parallel adapters' checkers with the default components.
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ def small_map():
     return ProceduralTownLoader(size=400.0, num_roundabouts=0).load()
 
 
-def native_env(road_map, physics: str, actions: str, terminated: str):
+def native_env(road_map, physics: str, actions: str, terminated: str, obs: str = "paper"):
     """A one-world `VecEnv` built by the builder from the shipped configs."""
     cfg = compose(
         "sim",
@@ -75,6 +77,7 @@ def native_env(road_map, physics: str, actions: str, terminated: str):
             f"physics={physics}",
             f"env/actions={actions}",
             f"env.terminated_vehicle={terminated}",
+            f"obs={obs}",
             "env.num_worlds=1",
             *SPAWNER,
         ],
@@ -135,8 +138,39 @@ def test_parallel_env_checkers(small_map, physics, actions, terminated, _):
     assert env.possible_agents == [f"agent_{i}" for i in range(4)]
 
 
+# the observation encoders: the encoder checker and the adapters' checkers with each ----------
+# paper, partial, rules (custom names an encoder defined elsewhere: tests/obs/test_load_encoder.py)
+ENCODERS = tuple(o for o in valid_options("obs") if o != "custom")
+
+
+@pytest.mark.parametrize("obs", ENCODERS)
+def test_encoder_checker(small_map, obs):
+    from hydra.utils import instantiate
+
+    from selfplaydrive.testing.check_encoder import check_encoder
+
+    encoder = instantiate(compose("sim", [f"obs={obs}"]).obs)
+    report = check_encoder(encoder, small_map, spawner=small_spawner(), steps=25)
+    assert report.rows_checked > 0
+
+
+@pytest.mark.parametrize("obs", ENCODERS)
+def test_adapter_checkers_per_encoder(small_map, obs):
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from pettingzoo.test import parallel_api_test
+
+    from selfplaydrive.env import DrivingParallelEnv, SingleAgentEnv
+
+    env = native_env(small_map, "friction", "discrete", "remove", obs)
+    assert env.encoder.name == ("paper" if obs == "paper" else obs)
+    with strict_warnings():
+        gym_check_env(SingleAgentEnv(env, others="rule_based"), skip_render_check=True)
+        parallel_api_test(
+            DrivingParallelEnv(native_env(small_map, "friction", "discrete", "remove", obs)), num_cycles=40
+        )
+
+
 # the shipped component checkers over spawner x physics x reward term ------------------------
-# (an encoder axis joins when observation encoders are components: selfplaydrive.obs.base)
 TERMS = ("builtin", "python", "numba")
 
 
