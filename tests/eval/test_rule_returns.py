@@ -31,6 +31,8 @@ FIXES = {
     "fix_wrong_way": ["wrong_way"],
     "fix_all": ["red_intersection", "stop_sign", "crosswalk_yield", "wrong_way"],
 }
+# the fixes whose terms depend on state the paper observation lacks (STOP/YIELD, crosswalk state)
+OBSERVES_RULES = {"fix_stop_sign", "fix_crosswalk_yield", "fix_all"}
 
 
 def _need_terms(names) -> None:
@@ -175,9 +177,14 @@ def test_experiment_composes_and_builds(experiment):
     for name in FIXES[experiment]:
         assert cfg.reward.terms[name] > 0
     assert cfg.env.params == laptop.env.params and cfg.model == laptop.model  # the main job's
+    # the main job's observation sizes apply to whichever encoder the experiment selects
+    assert (cfg.obs.max_objects, cfg.obs.max_road) == (laptop.obs.max_objects, laptop.obs.max_road) == (16, 64)
+    rules = experiment in OBSERVES_RULES
+    assert cfg.obs["_target_"] == ("selfplaydrive.obs.RulesEncoder" if rules else laptop.obs["_target_"])
     _need_terms(FIXES[experiment])
     env = build_env(cfg)
     assert set(FIXES[experiment]) <= set(env.term_names)
+    assert (type(env.encoder).__name__ == "RulesEncoder") == rules, type(env.encoder)
 
 
 @pytest.mark.parametrize(

@@ -5,8 +5,11 @@ have to stop; the generator writes
 
 - traffic-light stop lines on every approach of a signalised junction, with the two crossing
   axes in different signal groups (approaches of one axis share a group);
-- yield lines (`StopKind.YIELD`) on the minor approaches of priority junctions and on every
-  roundabout entry;
+- stop-sign lines (`StopKind.STOP`) on the two minor approaches of a minor street crossing a
+  main road (4-way priority junctions whose priority road is a main road; no randomness: the
+  rule follows from the junction kinds, so the rest of the town is unchanged);
+- yield lines (`StopKind.YIELD`) on the minor approaches of every other priority junction and
+  on every roundabout entry;
 - nothing at right-hand-rule junctions (minor x minor, unsigned) and at bends.
 """
 
@@ -103,13 +106,25 @@ def decide_features(rng: np.random.Generator, junctions: list[Junction], net: Ne
             arm.hw_cw = arm.lanes * arm.lane_width + p.shoulder
 
 
+def stop_kind(j: Junction) -> StopKind:
+    """The sign on the minor approaches of a priority junction or the entries of a roundabout.
+
+    STOP where a minor street crosses a main road (four arms, the priority road a main road):
+    crossing two or more lanes per direction of faster traffic (paper section 2.1 treats stop
+    and yield signs alike; the STOP kind is what the `stop_sign` reward term and the stop-sign
+    suite act on). YIELD everywhere else.
+    """
+    crossing_main = len(j.arms) == 4 and bool(j.priority) and all(j.arms[k].main for k in j.priority)
+    return StopKind.STOP if j.kind == "priority" and crossing_main else StopKind.YIELD
+
+
 def build_regulation(
     junctions: list[Junction],
     dirs: dict[tuple[int, int], DirLanes],
     plans: dict[tuple[int, int], DirPlan],
     sink: TownSink,
 ) -> None:
-    """Traffic-light stop lines and yield lines of every junction."""
+    """Traffic-light stop lines, stop-sign and yield lines of every junction."""
     group = 0
     for j in junctions:
         for k, arm in enumerate(j.arms):
@@ -121,7 +136,8 @@ def build_regulation(
                 light = TrafficLightElement(line, group + j.phases[k], lanes, source_id=f"{sid}/light")
                 sink.elements.traffic_lights.append(light)
             elif j.kind == "roundabout" or (j.kind == "priority" and k not in j.priority):
-                stop = StopLineElement(line, StopKind.YIELD, lanes, source_id=f"{sid}/yield")
+                kind = stop_kind(j)
+                stop = StopLineElement(line, kind, lanes, source_id=f"{sid}/{kind.name.lower()}")
                 sink.elements.stop_lines.append(stop)
         if j.kind == "signal":
             group += max(j.phases) + 1
