@@ -202,6 +202,36 @@ def test_too_few_roundabout_sites_warn():
         generate_town(0, params)
 
 
+def test_stop_signs_where_a_minor_street_crosses_a_main_road():
+    """STOP on the minor approaches of 4-way junctions whose priority road is a main road; YIELD
+    on every other priority junction's minor approaches and roundabout entry (regulation.py)."""
+    elements, junctions = build_town(0, TownParams(size=800.0))
+    kinds = {}
+    for s in elements.stop_lines:  # source id "n<node>/r<road>/<kind>"
+        node, road, kind = s.source_id.split("/")
+        kinds[(int(node[1:]), int(road[1:]))] = s.kind
+        assert kind == s.kind.name.lower()
+    stops = 0
+    for j in junctions:
+        if j.kind not in ("priority", "roundabout"):
+            continue
+        crossing_main = len(j.arms) == 4 and all(j.arms[k].main for k in j.priority)
+        for k, arm in enumerate(j.arms):
+            if j.kind == "priority" and k in j.priority:
+                assert (j.node, arm.road) not in kinds
+                continue
+            want = StopKind.STOP if j.kind == "priority" and crossing_main else StopKind.YIELD
+            assert kinds[(j.node, arm.road)] == want
+            stops += want == StopKind.STOP
+    assert stops >= 2  # this town has such crossings
+    assert sum(s.kind == StopKind.YIELD for s in elements.stop_lines) > 0
+
+
+def test_default_town_has_stop_and_yield_lines():
+    road_map = load_default_map()
+    assert np.bincount(road_map.stop_kind, minlength=2)[[StopKind.STOP, StopKind.YIELD]].tolist() == [118, 186]
+
+
 def test_roundabout_entries_yield_and_ring_is_one_way():
     elements, junctions = build_town(2, TownParams(size=800.0, num_roundabouts=3, lanes_per_direction=1))
     assert junction_counts(junctions)["roundabout"] == 3
