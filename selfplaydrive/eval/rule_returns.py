@@ -186,8 +186,8 @@ class DriverResult:
 
 
 def with_stop_signs(road_map: RoadMap) -> RoadMap:
-    """A copy of `road_map` whose stop lines are all STOP lines, for a map that has none (the
-    bundled town's are all YIELD); any other map is returned as it is."""
+    """A copy of `road_map` whose stop lines are all STOP lines, for a map that has none (all
+    YIELD); any other map (the bundled town, Tartu) is returned as it is."""
     kinds = np.asarray(road_map.stop_kind)
     if len(kinds) == 0 or np.any(kinds == StopKind.STOP):
         return road_map

@@ -8,6 +8,7 @@ new terms skip while the library lacks them."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -70,11 +71,12 @@ def test_swerve_path_hand_computed():
 
 
 def test_with_stop_signs_relabels_only_maps_without_stop_lines(town):
-    assert np.all(town.stop_kind == StopKind.YIELD)  # the bundled town has only yield lines
-    relabelled = rr.with_stop_signs(town)
+    assert rr.with_stop_signs(town) is town  # the bundled town has STOP lines of its own
+    all_yield = dataclasses.replace(town, stop_kind=np.full_like(town.stop_kind, StopKind.YIELD))
+    relabelled = rr.with_stop_signs(all_yield)
     assert np.all(relabelled.stop_kind == StopKind.STOP)
     assert len(relabelled.stop_kind) == len(town.stop_kind)
-    assert np.all(town.stop_kind == StopKind.YIELD)  # the original is untouched
+    assert np.all(all_yield.stop_kind == StopKind.YIELD)  # the original is untouched
     assert rr.with_stop_signs(relabelled) is relabelled
 
 
@@ -178,7 +180,8 @@ def test_experiment_composes_and_builds(experiment):
         assert cfg.reward.terms[name] > 0
     assert cfg.env.params == laptop.env.params and cfg.model == laptop.model  # the main job's
     # the main job's observation sizes apply to whichever encoder the experiment selects
-    assert (cfg.obs.max_objects, cfg.obs.max_road) == (laptop.obs.max_objects, laptop.obs.max_road) == (16, 64)
+    sizes = (cfg.obs.max_objects, cfg.obs.max_road)
+    assert sizes == (laptop.obs.max_objects, laptop.obs.max_road) == (16, 64)
     rules = experiment in OBSERVES_RULES
     assert cfg.obs["_target_"] == ("selfplaydrive.obs.RulesEncoder" if rules else laptop.obs["_target_"])
     _need_terms(FIXES[experiment])

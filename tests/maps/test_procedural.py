@@ -229,7 +229,8 @@ def test_stop_signs_where_a_minor_street_crosses_a_main_road():
 
 def test_default_town_has_stop_and_yield_lines():
     road_map = load_default_map()
-    assert np.bincount(road_map.stop_kind, minlength=2)[[StopKind.STOP, StopKind.YIELD]].tolist() == [118, 186]
+    counts = np.bincount(road_map.stop_kind, minlength=2)
+    assert counts[[StopKind.STOP, StopKind.YIELD]].tolist() == [118, 186]
 
 
 def test_roundabout_entries_yield_and_ring_is_one_way():
