@@ -6,7 +6,8 @@ rule reward terms (red_intersection, stop_sign, crosswalk_yield, wrong_way; docs
 the jerk-limited bicycle (`physics=jerk`) and one of the two new encoders (only one is active
 at a time): `obs=rules` (STOP/YIELD lines, crosswalk occupancy) or `obs=partial` with occlusion
 and every perception-noise effect on. Each variant is the `selfplaydrive bench` config with the
-overrides below, stepped with random actions of its own action space.
+overrides below, stepped with random actions of its own action space; the parts are also
+timed alone (the rule terms, the jerk model, each encoder) to show where the cost is.
 
 Rounds alternate the variants (the order rotated each round) so that drift of a shared machine
 hits every variant alike. Per round and variant: agent-steps (valid agents summed over the
@@ -39,6 +40,11 @@ VARIANTS: dict[str, list[str]] = {
     "paper": [],
     "all_on_rules": [*ALL_ON, "obs=rules"],
     "all_on_partial": [*ALL_ON, "obs=partial", "obs.occlusion=true", *NOISE],
+    # the parts alone, to see where the cost is
+    "rule_terms": list(ALL_ON[1:]),
+    "jerk": ["physics=jerk"],
+    "obs_rules": ["obs=rules"],
+    "obs_partial_occlusion": ["obs=partial", "obs.occlusion=true"],
 }
 
 
