@@ -1,7 +1,7 @@
 """Procedural town generator and the bundled default town (paper section 2.1; docs/maps/procedural.md).
 
 A town is a jittered grid of streets with 3- and 4-way intersections, multi-lane main roads
-with turn pockets, roundabouts, signalised intersections, yield lines and crosswalks, in
+with turn pockets, roundabouts, signalised intersections, stop and yield lines and crosswalks, in
 right-hand traffic, with a legal lane graph that is strongly connected.
 
     from selfplaydrive.maps.procedural import TownParams, generate_town, load_default_map

@@ -39,6 +39,8 @@ class TownParams:
             traffic lights; main x main crossings are chosen first [-].
         priority_share: Share of the remaining all-minor intersections with a priority road
             (yield lines on the side road); the rest follow the right-hand rule, unsigned [-].
+            (Main x minor junctions always give the main road priority; where a minor street
+            crosses a main road, the side road gets STOP lines: regulation.stop_kind.)
         num_roundabouts: Roundabouts wanted; placed on nodes whose arms all have one lane per
             direction, never next to each other. Fewer are built (with a `UserWarning`) if the
             town has too few such nodes.

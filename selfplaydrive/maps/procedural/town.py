@@ -55,7 +55,7 @@ def generate_town(seed: int, params: TownParams | None = None) -> MapElements:
         params: Town parameters (default `TownParams()`: a 1.6 x 1.6 km town).
 
     Returns:
-        `MapElements` (lanes, road edges, yield lines, traffic lights, crosswalks) in a local
+        `MapElements` (lanes, road edges, stop and yield lines, traffic lights, crosswalks) in a local
         metric frame with the town's south-west grid node near (0, 0).
 
     Raises:
