@@ -51,3 +51,18 @@ def test_suite_alone_on_tartu(suite, tmp_path, monkeypatch):
     path = shared_map("tartu_lanelet2/tartu_demo_l.osm")
     monkeypatch.setenv("SELFPLAYDRIVE_SHARED_MAPS", str(path.parents[1]))
     _check(suite, *_eval_one(suite, ["map=tartu"], tmp_path / "run"))
+
+
+def test_suites_shorthand_runs_only_the_named_suites(tmp_path):
+    """`selfplaydrive eval suites=[...]` (issue #15): only those suites, no long-form."""
+    out = tmp_path / "run"
+    args = ["eval", "eval=quick", "suites=[red_lights,spawn_sanity]", "eval.suites.red_lights=2"]
+    assert main([*args, "eval.suites.spawn_sanity=4", "eval.batch_size=4", f"hydra.run.dir={out}"]) == 0
+    assert set(json.loads((out / "suites.json").read_text())) == {"red_lights", "spawn_sanity"}
+    assert not list(out.glob("longform*"))
+
+
+def test_suites_shorthand_names_an_unknown_suite(tmp_path, capsys):
+    assert main(["eval", "eval=quick", "suites=[red_light]", f"hydra.run.dir={tmp_path / 'run'}"]) != 0
+    err = capsys.readouterr().err
+    assert "suites: unknown ['red_light']" in err and "red_lights" in err

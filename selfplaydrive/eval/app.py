@@ -201,6 +201,8 @@ def run_eval(cfg: Any, run_dir: Path) -> dict[str, Any]:
     unknown = sorted(set(analyses) - set(ANALYSES))
     if unknown:
         raise ConfigError(f"eval.analyses: unknown {unknown}; valid choices: {', '.join(ANALYSES)}")
+    if cfg.get("suites") is not None:  # `suites=[...]`: just these suites
+        analyses = ["suites"]
     target = resolve_target(cfg)  # before the maps: a bad checkpoint fails at once
     maps = build_maps(cfg.map)
     make_env = EvalEnvFactory(maps, target)
@@ -227,7 +229,7 @@ def _run_suites(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_dir:
     result = run_all_suites(
         make_env.maps,
         target.policy.factory,
-        counts=dict(cfg.eval.suites),
+        counts=suite_counts(cfg),
         seed=int(cfg.seed),
         batch_size=int(cfg.eval.batch_size),
         env_factory=make_env,
@@ -235,6 +237,27 @@ def _run_suites(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_dir:
     )
     write_report(result, run_dir, "suites_detail", "Rule-adherence suites, per scenario")
     return write_report(_suite_summaries(result), run_dir, "suites", "Rule-adherence suites")
+
+
+def suite_counts(cfg: Any) -> dict[str, int]:
+    """Scenarios per suite: `eval.suites`, or only the suites named by ``suites=[...]``.
+
+    Raises:
+        ConfigError: ``suites`` is not a list of names, or names a suite `eval.suites` lacks.
+    """
+    counts = {str(k): int(v) for k, v in dict(cfg.eval.suites).items()}
+    chosen = cfg.get("suites")
+    if chosen is None:
+        return counts
+    if isinstance(chosen, str) or not hasattr(chosen, "__iter__"):
+        raise ConfigError(f"suites: expected a list of suite names such as [red_lights], got {chosen!r}")
+    names = [str(n) for n in chosen]
+    unknown = [n for n in names if n not in counts]
+    if unknown or not names:
+        raise ConfigError(
+            f"suites: unknown {unknown or names}; expected names of eval.suites: {', '.join(counts)}"
+        )
+    return {n: counts[n] for n in names}
 
 
 def _run_longform(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_dir: Path) -> dict[str, Path]:
