@@ -1,0 +1,168 @@
+"""`RewardSettings`: every reward setting in one object, the ``reward`` config group (section 2.3).
+
+The group holds the coefficient distributions (a `ConditioningSampler`, which the builder hands
+to the spawner), the terms and their weights (a `LinearReward`), the reward constants the
+kernels read (waypoint and velocity rewards, thresholds) and, derived from the ranges, the
+observation scale of the coefficients (section 2.5). `upgrade_run_config` maps the layout of
+configs saved before this group held everything (reward constants under ``env.params``,
+``spawner.conditioning``) to this one.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+from selfplaydrive.errors import ConfigError
+from selfplaydrive.scenario.conditioning import ConditioningSampler
+
+# reward constants -> paper value (section 2.3); `SimParams` fields of the same names carry them
+# to the kernels (_sim/reward.pyx, _sim/road.pyx for the comfort event)
+CONSTANTS: dict[str, float] = {
+    "waypoint_reward": 0.25,  # reward per reached waypoint
+    "velocity_reward": 2.5e-4,  # velocity term per step at alpha = 0
+    "velocity_min": 2.5,  # [m/s] no velocity term below this speed
+    "center_max_angle_deg": 60.0,  # [deg] centre term only when |alpha| is below this
+    "comfort_limit": 3.0,  # [m/s^2] comfort event when |a_long| or |a_lat| exceeds this
+    "terminate_threshold": 0.5,  # C_collision / C_offroad at which the event ends the agent
+}
+_POSITIVE = ("velocity_min", "center_max_angle_deg", "comfort_limit")
+_SAMPLER = "selfplaydrive.scenario.conditioning.ConditioningSampler"
+TARGET = "selfplaydrive.rewards.settings.RewardSettings"
+
+
+class RewardSettings:
+    """The reward of section 2.3: distributions, terms, constants and observation scale.
+
+    Args:
+        mode: "train" (coefficients drawn per agent) or "eval" (the fixed evaluation vector).
+        terms: Term name -> weight (`LinearReward`); None: the paper's eight terms, weight 1.
+        waypoint_reward: Reward per reached waypoint.
+        velocity_reward: Velocity term per step at full alignment.
+        velocity_min: Minimum speed of the velocity term [m/s].
+        center_max_angle_deg: The centre term needs |alpha| below this [deg].
+        comfort_limit: Comfort event when |a_long| or |a_lat| exceeds this [m/s^2].
+        terminate_threshold: C_collision / C_offroad at or above which the event ends the agent.
+        **ranges: The coefficient distributions, `ConditioningSampler` arguments
+            (waypoint_radius, collision, ..., eval_center_bias).
+
+    Raises:
+        ConfigError: On a bad range, mode or constant, naming the key.
+    """
+
+    def __init__(
+        self,
+        mode: str = "train",
+        terms: Mapping[str, Any] | None = None,
+        waypoint_reward: float = CONSTANTS["waypoint_reward"],
+        velocity_reward: float = CONSTANTS["velocity_reward"],
+        velocity_min: float = CONSTANTS["velocity_min"],
+        center_max_angle_deg: float = CONSTANTS["center_max_angle_deg"],
+        comfort_limit: float = CONSTANTS["comfort_limit"],
+        terminate_threshold: float = CONSTANTS["terminate_threshold"],
+        **ranges: Any,
+    ) -> None:
+        try:
+            self.conditioning = ConditioningSampler(mode=mode, **ranges)
+        except TypeError as exc:  # an unknown key
+            raise ConfigError(f"reward: {exc}; the reward group's keys are documented in docs/rewards.md") from exc
+        if terms is not None and not isinstance(terms, Mapping):
+            raise ConfigError(f"reward.terms: expected a mapping of term name -> weight, got {terms!r}")
+        self.terms = dict(terms) if terms is not None else None
+        given = {
+            "waypoint_reward": waypoint_reward,
+            "velocity_reward": velocity_reward,
+            "velocity_min": velocity_min,
+            "center_max_angle_deg": center_max_angle_deg,
+            "comfort_limit": comfort_limit,
+            "terminate_threshold": terminate_threshold,
+        }
+        self.constants = {k: _check_constant(k, v) for k, v in given.items()}
+
+    @property
+    def coeff_scale(self) -> tuple[float, ...]:
+        """Observation scale of the coefficients, derived from the ranges (section 2.5)."""
+        return self.conditioning.observation_scale()
+
+    def linear_reward(self) -> Any:
+        """The env's `LinearReward` of `terms`, or None for the paper's default terms."""
+        if self.terms is None:
+            return None
+        from selfplaydrive.rewards.components import LinearReward
+
+        return LinearReward(self.terms)  # it checks the mapping and names the bad key
+
+    def sim_params(self, params: Any = None) -> Any:
+        """`params` (a `SimParams`, default the paper's) with this group's constants and scale."""
+        import dataclasses
+
+        from selfplaydrive.sim.params import SimParams
+
+        base = params if params is not None else SimParams()
+        return dataclasses.replace(base, **self.constants, coeff_scale=self.coeff_scale)
+
+
+def _check_constant(name: str, value: Any) -> float:
+    """`value` as a finite float (positive for the speeds, angles and limits)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"reward.{name}: expected a number, got {value!r}") from exc
+    if not math.isfinite(v) or (name in _POSITIVE and v <= 0):
+        kind = "a positive finite number" if name in _POSITIVE else "a finite number"
+        raise ConfigError(f"reward.{name}: expected {kind}, got {value!r}")
+    return v
+
+
+def check_env_params(params: Any) -> None:
+    """Raise if an ``env.params`` node sets a reward constant (they moved to ``reward``).
+
+    Raises:
+        ConfigError: Naming the key and where it lives now.
+    """
+    moved = [k for k in CONSTANTS if params is not None and k in params]
+    if moved:
+        new = ", ".join(f"env.params.{k} -> reward.{k}" for k in moved)
+        raise ConfigError(f"the reward constants moved to the reward group: {new} (docs/rewards.md)")
+
+
+def upgrade_run_config(cfg: Any) -> Any:
+    """Map a saved config of the old layout to the reward group's, in place; returns `cfg`.
+
+    Old layout: ``reward._target_`` the `ConditioningSampler`, the reward constants under
+    ``env.params``, the sampler copied into ``spawner.conditioning``. A `UserWarning` names
+    what moved. Configs of the current layout are returned unchanged.
+    """
+    from omegaconf import OmegaConf, open_dict
+
+    notes = []
+    with open_dict(cfg):
+        reward = cfg.get("reward")
+        if reward is None and "spawner" in cfg and "conditioning" in cfg.spawner:
+            cfg.reward = OmegaConf.create(OmegaConf.to_container(cfg.spawner.conditioning, resolve=True))
+            reward = cfg.reward
+            notes.append("spawner.conditioning -> reward")
+        if OmegaConf.is_dict(reward) and reward.get("_target_") == _SAMPLER:
+            reward._target_ = TARGET
+            notes.append(f"reward._target_ -> {TARGET}")
+        params = cfg.get("env", {}).get("params") if OmegaConf.is_dict(cfg.get("env")) else None
+        for key in CONSTANTS:
+            if OmegaConf.is_dict(params) and key in params:
+                if OmegaConf.is_dict(reward):
+                    reward[key] = params[key]
+                notes.append(f"env.params.{key} -> reward.{key}")
+                del params[key]
+        if "spawner" in cfg and OmegaConf.is_dict(cfg.spawner) and "conditioning" in cfg.spawner:
+            del cfg.spawner["conditioning"]
+            if "spawner.conditioning -> reward" not in notes:
+                notes.append("spawner.conditioning dropped (the builder passes reward's sampler)")
+    if notes:
+        warnings.warn(
+            "run config of the old layout (before the reward group held every reward setting), "
+            "read with " + "; ".join(notes),
+            UserWarning,
+            stacklevel=2,
+        )
+    return cfg
