@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.scenario.conditioning import ConditioningSampler
+from selfplaydrive.scenario.conditioning import ConditioningSampler, Range
 
 # reward constants -> paper value (section 2.3); `SimParams` fields of the same names carry them
 # to the kernels (_sim/reward.pyx, _sim/road.pyx for the comfort event)
@@ -38,6 +38,10 @@ class RewardSettings:
 
     Args:
         mode: "train" (coefficients drawn per agent) or "eval" (the fixed evaluation vector).
+        waypoint_radius, collision, offroad, red_light, comfort, center_low, center_high,
+            center_low_prob, center_bias, align_low, align_high, align_low_prob,
+            eval_waypoint_radius, eval_center_bias: The coefficient distributions and eval
+            values, as `ConditioningSampler` takes them (its defaults are the paper's).
         terms: Term name -> weight (`LinearReward`); None: the paper's eight terms, weight 1.
         waypoint_reward: Reward per reached waypoint.
         velocity_reward: Velocity term per step at full alignment.
@@ -45,8 +49,6 @@ class RewardSettings:
         center_max_angle_deg: The centre term needs |alpha| below this [deg].
         comfort_limit: Comfort event when |a_long| or |a_lat| exceeds this [m/s^2].
         terminate_threshold: C_collision / C_offroad at or above which the event ends the agent.
-        **ranges: The coefficient distributions, `ConditioningSampler` arguments
-            (waypoint_radius, collision, ..., eval_center_bias).
 
     Raises:
         ConfigError: On a bad range, mode or constant, naming the key.
@@ -55,6 +57,20 @@ class RewardSettings:
     def __init__(
         self,
         mode: str = "train",
+        waypoint_radius: Range = (1.0, 3.0),
+        collision: Range = (0.0, 1.0),
+        offroad: Range = (0.0, 1.0),
+        red_light: Range = (0.0, 1.0),
+        comfort: Range = (0.0, 0.01),
+        center_low: Range = (2.5e-5, 2.5e-4),
+        center_high: Range = (2.5e-4, 2.5e-3),
+        center_low_prob: float = 0.5,
+        center_bias: Range = (-0.3, 0.3),
+        align_low: Range = (2.5e-5, 2.5e-3),
+        align_high: Range = (2.5e-3, 2.5e-2),
+        align_low_prob: float = 0.5,
+        eval_waypoint_radius: float = 3.0,
+        eval_center_bias: float = 0.0,
         terms: Mapping[str, Any] | None = None,
         waypoint_reward: float = CONSTANTS["waypoint_reward"],
         velocity_reward: float = CONSTANTS["velocity_reward"],
@@ -62,12 +78,12 @@ class RewardSettings:
         center_max_angle_deg: float = CONSTANTS["center_max_angle_deg"],
         comfort_limit: float = CONSTANTS["comfort_limit"],
         terminate_threshold: float = CONSTANTS["terminate_threshold"],
-        **ranges: Any,
     ) -> None:
-        try:
-            self.conditioning = ConditioningSampler(mode=mode, **ranges)
-        except TypeError as exc:  # an unknown key
-            raise ConfigError(f"reward: {exc}; the reward group's keys are documented in docs/rewards.md") from exc
+        self.conditioning = ConditioningSampler(
+            mode, waypoint_radius, collision, offroad, red_light, comfort, center_low, center_high,
+            center_low_prob, center_bias, align_low, align_high, align_low_prob,
+            eval_waypoint_radius, eval_center_bias,
+        )  # fmt: skip
         if terms is not None and not isinstance(terms, Mapping):
             raise ConfigError(f"reward.terms: expected a mapping of term name -> weight, got {terms!r}")
         self.terms = dict(terms) if terms is not None else None
@@ -160,8 +176,8 @@ def upgrade_run_config(cfg: Any) -> Any:
                 notes.append("spawner.conditioning dropped (the builder passes reward's sampler)")
     if notes:
         warnings.warn(
-            "run config of the old layout (before the reward group held every reward setting), "
-            "read with " + "; ".join(notes),
+            "config of the old layout (before the reward group held every reward setting), "
+            "read as " + "; ".join(notes),
             UserWarning,
             stacklevel=2,
         )
