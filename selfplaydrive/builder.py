@@ -157,7 +157,8 @@ def build_reward(cfg: Any) -> Any:
     settings = instantiate(cfg.reward)
     if not isinstance(settings, RewardSettings):
         raise ConfigError(
-            f"reward: expected a selfplaydrive.rewards.settings.RewardSettings node, got {type(settings).__name__}"
+            f"reward: expected a selfplaydrive.rewards.settings.RewardSettings node, "
+            f"got {type(settings).__name__}"
         )
     return settings
 
@@ -261,7 +262,6 @@ def make_env(
     items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
     from selfplaydrive.rewards.components import LinearReward
-
     from selfplaydrive.rewards.settings import RewardSettings
 
     if isinstance(reward, LinearReward):  # the terms, not the coefficients' sampler

@@ -102,14 +102,13 @@ class SimParams:
         """Validate `coeff_scale` and store it as a tuple of floats (a config gives a list)."""
         if self.coeff_scale is None:
             return
+        expected = f"sim.coeff_scale: expected {len(COEFF_SCALE)} positive finite numbers"
         try:
             scale = tuple(float(v) for v in self.coeff_scale)
         except (TypeError, ValueError) as exc:
-            raise ConfigError(f"sim.coeff_scale: expected {len(COEFF_SCALE)} numbers, got {self.coeff_scale!r}") from exc
+            raise ConfigError(f"{expected}, got {self.coeff_scale!r}") from exc
         if len(scale) != len(COEFF_SCALE) or not all(np.isfinite(v) and v > 0 for v in scale):
-            raise ConfigError(
-                f"sim.coeff_scale: expected {len(COEFF_SCALE)} positive finite numbers, got {self.coeff_scale!r}"
-            )
+            raise ConfigError(f"{expected}, got {self.coeff_scale!r}")
         object.__setattr__(self, "coeff_scale", scale)
 
     def kernel_params(self) -> dict[str, object]:

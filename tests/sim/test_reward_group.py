@@ -95,7 +95,7 @@ def test_reward_constant_override_reaches_the_kernel(straight_map):
 
 
 def test_old_env_params_key_names_its_new_place():
-    with pytest.raises(ConfigError, match=r"env.params.velocity_reward' moved to the reward group: use reward"):
+    with pytest.raises(ConfigError, match=r"velocity_reward' moved to the reward group: use reward.velocity"):
         compose("sim", ["env.params.velocity_reward=0.1"])
     cfg = compose("sim", ["+env.params.velocity_reward=0.1"])  # forced in: the builder maps it
     with pytest.warns(UserWarning, match=r"env.params.velocity_reward -> reward.velocity_reward"):
