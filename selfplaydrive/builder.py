@@ -215,9 +215,10 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
     # as RoadMap into a structured config; env.params is built above (build_params)
     from omegaconf import OmegaConf, open_dict
 
-    env_node = OmegaConf.create(OmegaConf.to_container(cfg.env, resolve=True))
+    env_node: Any = OmegaConf.create(OmegaConf.to_container(cfg.env, resolve=True))
     with open_dict(env_node):
-        env_node.pop("params", None)
+        if "params" in env_node:
+            del env_node["params"]
     return instantiate(env_node, _partial_=True)(**kwargs)
 
 

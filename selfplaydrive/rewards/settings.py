@@ -27,6 +27,10 @@ CONSTANTS: dict[str, float] = {
     "center_max_angle_deg": 60.0,  # [deg] centre term only when |alpha| is below this
     "comfort_limit": 3.0,  # [m/s^2] comfort event when |a_long| or |a_lat| exceeds this
     "terminate_threshold": 0.5,  # C_collision / C_offroad at which the event ends the agent
+    "collision_speed_gain": 0.1,  # [s/m] collision, road-edge penalties scale with (1 + gain v)
+    "center_bonus": 0.05,  # centre term's bonus center_bonus / exp(|B - s| - center_bonus_offset)
+    "center_bonus_offset": 0.5,  # [m]
+    "align_bonus": 0.0025,  # align term's bonus align_bonus (1 - |alpha| / (pi / 2))
 }
 _POSITIVE = ("velocity_min", "center_max_angle_deg", "comfort_limit")
 _SAMPLER = "selfplaydrive.scenario.conditioning.ConditioningSampler"
@@ -49,6 +53,10 @@ class RewardSettings:
         center_max_angle_deg: The centre term needs |alpha| below this [deg].
         comfort_limit: Comfort event when |a_long| or |a_lat| exceeds this [m/s^2].
         terminate_threshold: C_collision / C_offroad at or above which the event ends the agent.
+        collision_speed_gain: Collision and road-edge penalties scale with (1 + gain v) [s/m].
+        center_bonus: Height of the centre term's bonus, bonus / exp(|B - s| - offset).
+        center_bonus_offset: Offset of that bonus [m].
+        align_bonus: The align term's bonus, align_bonus (1 - |alpha| / (pi / 2)).
 
     Raises:
         ConfigError: On a bad range, mode or constant, naming the key.
@@ -78,6 +86,10 @@ class RewardSettings:
         center_max_angle_deg: float = CONSTANTS["center_max_angle_deg"],
         comfort_limit: float = CONSTANTS["comfort_limit"],
         terminate_threshold: float = CONSTANTS["terminate_threshold"],
+        collision_speed_gain: float = CONSTANTS["collision_speed_gain"],
+        center_bonus: float = CONSTANTS["center_bonus"],
+        center_bonus_offset: float = CONSTANTS["center_bonus_offset"],
+        align_bonus: float = CONSTANTS["align_bonus"],
     ) -> None:
         self.conditioning = ConditioningSampler(
             mode, waypoint_radius, collision, offroad, red_light, comfort, center_low, center_high,
@@ -94,6 +106,10 @@ class RewardSettings:
             "center_max_angle_deg": center_max_angle_deg,
             "comfort_limit": comfort_limit,
             "terminate_threshold": terminate_threshold,
+            "collision_speed_gain": collision_speed_gain,
+            "center_bonus": center_bonus,
+            "center_bonus_offset": center_bonus_offset,
+            "align_bonus": align_bonus,
         }
         self.constants = {k: _check_constant(k, v) for k, v in given.items()}
 

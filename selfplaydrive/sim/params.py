@@ -24,7 +24,8 @@ class SimParams:
     """Simulator constants (not physics or action constants: see physics/ and sim/actions.py).
 
     The reward constants (comfort_limit, terminate_threshold, waypoint_reward, velocity_reward,
-    velocity_min, center_max_angle_deg) are kernel parameters kept here, but configs set them in
+    velocity_min, center_max_angle_deg and the term shapes collision_speed_gain, center_bonus,
+    center_bonus_offset, align_bonus) are kernel parameters kept here, but configs set them in
     the ``reward`` group (`selfplaydrive.rewards.settings.RewardSettings`), which the builder
     copies into this object; so does `coeff_scale`, derived from the reward group's ranges.
 
@@ -37,6 +38,10 @@ class SimParams:
         velocity_reward: Velocity reward at full alignment, per step.
         velocity_min: Minimum speed of the velocity reward [m/s].
         center_max_angle_deg: Centre reward only when |alpha| is below this [deg].
+        collision_speed_gain: Collision and road-edge penalties scale with (1 + gain v) [s/m].
+        center_bonus: Height of the centre term's bonus, bonus / exp(|B - s| - offset).
+        center_bonus_offset: Offset of that bonus [m].
+        align_bonus: The align term's bonus, align_bonus (1 - |alpha| / (pi / 2)).
         light_min: Shortest traffic-light state [s].
         light_max: Longest traffic-light state [s].
         pedestrian_end: "stand" (stay at the path end) or "vanish".
@@ -60,6 +65,10 @@ class SimParams:
     velocity_reward: float = 2.5e-4
     velocity_min: float = 2.5
     center_max_angle_deg: float = 60.0
+    collision_speed_gain: float = 0.1
+    center_bonus: float = 0.05
+    center_bonus_offset: float = 0.5
+    align_bonus: float = 0.0025
     light_min: float = 0.5
     light_max: float = 10.0
     pedestrian_end: str = "stand"
@@ -123,6 +132,10 @@ class SimParams:
             "velocity_reward": d["velocity_reward"],
             "velocity_min": d["velocity_min"],
             "center_max_angle": float(np.deg2rad(d["center_max_angle_deg"])),
+            "collision_speed_gain": d["collision_speed_gain"],
+            "center_bonus": d["center_bonus"],
+            "center_bonus_offset": d["center_bonus_offset"],
+            "align_bonus": d["align_bonus"],
             "light_min": d["light_min"],
             "light_max": d["light_max"],
             "ped_vanish": int(self.pedestrian_end == "vanish"),
