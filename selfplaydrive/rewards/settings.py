@@ -167,29 +167,12 @@ def upgrade_run_config(cfg: Any) -> Any:
     ``env.params``, the sampler copied into ``spawner.conditioning``. A `UserWarning` names
     what moved. Configs of the current layout are returned unchanged.
     """
-    from omegaconf import OmegaConf, open_dict
+    from omegaconf import open_dict
 
-    notes = []
+    notes: list[str] = []
     with open_dict(cfg):
-        reward = cfg.get("reward")
-        if reward is None and "spawner" in cfg and "conditioning" in cfg.spawner:
-            cfg.reward = OmegaConf.create(OmegaConf.to_container(cfg.spawner.conditioning, resolve=True))
-            reward = cfg.reward
-            notes.append("spawner.conditioning -> reward")
-        if OmegaConf.is_dict(reward) and reward.get("_target_") == _SAMPLER:
-            reward._target_ = TARGET
-            notes.append(f"reward._target_ -> {TARGET}")
-        params = cfg.get("env", {}).get("params") if OmegaConf.is_dict(cfg.get("env")) else None
-        for key in CONSTANTS:
-            if OmegaConf.is_dict(params) and key in params:
-                if OmegaConf.is_dict(reward):
-                    reward[key] = params[key]
-                notes.append(f"env.params.{key} -> reward.{key}")
-                del params[key]
-        if "spawner" in cfg and OmegaConf.is_dict(cfg.spawner) and "conditioning" in cfg.spawner:
-            del cfg.spawner["conditioning"]
-            if "spawner.conditioning -> reward" not in notes:
-                notes.append("spawner.conditioning dropped (the builder passes reward's sampler)")
+        _move_conditioning(cfg, notes)
+        _move_constants(cfg, notes)
     if notes:
         warnings.warn(
             "config of the old layout (before the reward group held every reward setting), "
@@ -198,3 +181,48 @@ def upgrade_run_config(cfg: Any) -> Any:
             stacklevel=2,
         )
     return cfg
+
+
+def _reward_node(cfg: Any) -> Any:
+    """``cfg.reward``, created as the paper's `RewardSettings` node when absent."""
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.is_dict(cfg.get("reward")):
+        cfg.reward = OmegaConf.create({"_target_": TARGET})
+    return cfg.reward
+
+
+def _move_conditioning(cfg: Any, notes: list[str]) -> None:
+    """``spawner.conditioning`` (what the spawner drew from) into ``reward``; the sampler's
+    target becomes `RewardSettings`."""
+    from omegaconf import OmegaConf
+
+    spawner = cfg.get("spawner")
+    if OmegaConf.is_dict(spawner) and "conditioning" in spawner:
+        drawn = spawner.conditioning
+        if OmegaConf.is_dict(drawn):
+            reward = _reward_node(cfg)
+            for key in drawn:
+                if key not in ("_target_", "terms"):  # an override made there wins
+                    reward[key] = drawn[key]
+        del spawner["conditioning"]
+        notes.append("spawner.conditioning -> reward (the builder passes reward's sampler)")
+    reward = cfg.get("reward")
+    if OmegaConf.is_dict(reward) and reward.get("_target_") in (_SAMPLER, None):
+        reward._target_ = TARGET
+        notes.append(f"reward._target_ -> {TARGET}")
+
+
+def _move_constants(cfg: Any, notes: list[str]) -> None:
+    """The reward constants of ``env.params`` into ``reward``."""
+    from omegaconf import OmegaConf
+
+    env = cfg.get("env")
+    params: Any = env.get("params") if OmegaConf.is_dict(env) else None
+    if not OmegaConf.is_dict(params):
+        return
+    for key in CONSTANTS:
+        if key in params:
+            _reward_node(cfg)[key] = params[key]
+            del params[key]
+            notes.append(f"env.params.{key} -> reward.{key}")
