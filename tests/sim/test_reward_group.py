@@ -4,6 +4,7 @@ spawner config no longer interpolates it; saved configs of the old layout still 
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +141,45 @@ def test_old_run_config_loads_with_its_settings():
     assert spawner.conditioning.mode == "train" and spawner.conditioning.comfort == (0.0, 0.01)
     env = build_env(cfg, num_worlds=1)
     assert env.params == params and list(env.term_names) == list(TERM_NAMES)
+
+
+def test_upgrade_maps_every_old_key():
+    """The old layout's three places become the reward node; a current config is unchanged."""
+    from selfplaydrive.rewards.settings import TARGET, upgrade_run_config
+
+    sampler = "selfplaydrive.scenario.conditioning.ConditioningSampler"
+    old = OmegaConf.create(
+        {
+            "reward": {
+                "_target_": sampler,
+                "collision": {"low": 0.0, "high": 1.0},
+                "terms": {"waypoint": 1.0},
+            },
+            "spawner": {
+                "num_agents": 4,
+                "conditioning": {"_target_": sampler, "collision": {"low": 0.0, "high": 0.5}},
+            },
+            "env": {"params": {"dt": 0.1, "velocity_reward": 0.02}},
+        }
+    )
+    with pytest.warns(UserWarning, match="env.params.velocity_reward -> reward.velocity_reward"):
+        upgrade_run_config(old)
+    want = {
+        "_target_": TARGET,
+        "collision": {"low": 0.0, "high": 0.5},  # what the spawner drew from
+        "terms": {"waypoint": 1.0},
+        "velocity_reward": 0.02,
+    }
+    assert OmegaConf.to_container(old.reward) == want
+    assert OmegaConf.to_container(old.spawner) == {"num_agents": 4}
+    assert OmegaConf.to_container(old.env.params) == {"dt": 0.1}
+    bare = OmegaConf.create({"env": {"params": {"waypoint_reward": 1.0}}})  # no reward node
+    with pytest.warns(UserWarning):
+        upgrade_run_config(bare)
+    assert OmegaConf.to_container(bare.reward) == {"_target_": TARGET, "waypoint_reward": 1.0}
+    current = compose("train")
+    before = OmegaConf.to_container(current)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        upgrade_run_config(current)
+    assert OmegaConf.to_container(current) == before
