@@ -10,6 +10,7 @@ configs saved before this group held everything (reward constants under ``env.pa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Mapping
@@ -17,21 +18,16 @@ from typing import Any
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.scenario.conditioning import ConditioningSampler, Range
+from selfplaydrive.sim.params import SimParams
 
-# reward constants -> paper value (section 2.3); `SimParams` fields of the same names carry them
-# to the kernels (_sim/reward.pyx, _sim/road.pyx for the comfort event)
-CONSTANTS: dict[str, float] = {
-    "waypoint_reward": 0.25,  # reward per reached waypoint
-    "velocity_reward": 2.5e-4,  # velocity term per step at alpha = 0
-    "velocity_min": 2.5,  # [m/s] no velocity term below this speed
-    "center_max_angle_deg": 60.0,  # [deg] centre term only when |alpha| is below this
-    "comfort_limit": 3.0,  # [m/s^2] comfort event when |a_long| or |a_lat| exceeds this
-    "terminate_threshold": 0.5,  # C_collision / C_offroad at which the event ends the agent
-    "collision_speed_gain": 0.1,  # [s/m] collision, road-edge penalties scale with (1 + gain v)
-    "center_bonus": 0.05,  # centre term's bonus center_bonus / exp(|B - s| - center_bonus_offset)
-    "center_bonus_offset": 0.5,  # [m]
-    "align_bonus": 0.0025,  # align term's bonus align_bonus (1 - |alpha| / (pi / 2))
-}
+# the reward constants (section 2.3): `SimParams` fields of the same names carry them to the
+# kernels (_sim/reward.pyx, _sim/road.pyx for the comfort event); their paper values are the
+# fields' defaults (one source), documented there and in docs/rewards.md
+_CONSTANT_NAMES = (
+    "waypoint_reward", "velocity_reward", "velocity_min", "center_max_angle_deg", "comfort_limit",
+    "terminate_threshold", "collision_speed_gain", "center_bonus", "center_bonus_offset", "align_bonus",
+)  # fmt: skip
+CONSTANTS: dict[str, float] = {name: float(getattr(SimParams(), name)) for name in _CONSTANT_NAMES}
 _POSITIVE = ("velocity_min", "center_max_angle_deg", "comfort_limit")
 _SAMPLER = "selfplaydrive.scenario.conditioning.ConditioningSampler"
 TARGET = "selfplaydrive.rewards.settings.RewardSettings"
@@ -128,10 +124,6 @@ class RewardSettings:
 
     def sim_params(self, params: Any = None) -> Any:
         """`params` (a `SimParams`, default the paper's) with this group's constants and scale."""
-        import dataclasses
-
-        from selfplaydrive.sim.params import SimParams
-
         base = params if params is not None else SimParams()
         return dataclasses.replace(base, **self.constants, coeff_scale=self.coeff_scale)
 
