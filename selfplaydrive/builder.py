@@ -98,7 +98,7 @@ def config_error(exc: Exception, config_name: str, overrides: Sequence[str]) -> 
 
 def _moved_reward_key(key: str) -> str:
     """A hint when `key` is a reward constant under its old place ``env.params``, else ''."""
-    from selfplaydrive.rewards.settings import CONSTANTS
+    from selfplaydrive.sim.reward_settings import CONSTANTS
 
     name = key.removeprefix("env.params.")
     if name != key and name in CONSTANTS:
@@ -147,9 +147,9 @@ def build_reward(cfg: Any) -> Any:
     """The `RewardSettings` of a composed config's ``reward`` group (default: the paper's).
 
     A saved config of the old layout (reward constants under ``env.params``) is upgraded first
-    (`selfplaydrive.rewards.settings.upgrade_run_config`).
+    (`selfplaydrive.sim.reward_settings.upgrade_run_config`).
     """
-    from selfplaydrive.rewards.settings import RewardSettings, upgrade_run_config
+    from selfplaydrive.sim.reward_settings import RewardSettings, upgrade_run_config
 
     if "reward" not in cfg or cfg.reward is None:
         return RewardSettings()
@@ -157,7 +157,7 @@ def build_reward(cfg: Any) -> Any:
     settings = instantiate(cfg.reward)
     if not isinstance(settings, RewardSettings):
         raise ConfigError(
-            f"reward: expected a selfplaydrive.rewards.settings.RewardSettings node, "
+            f"reward: expected a selfplaydrive.sim.reward_settings.RewardSettings node, "
             f"got {type(settings).__name__}"
         )
     return settings
@@ -175,7 +175,7 @@ def build_params(cfg: Any, reward: Any = None) -> Any:
     Raises:
         ConfigError: ``env.params`` sets a reward constant (they live in ``reward``).
     """
-    from selfplaydrive.rewards.settings import check_env_params
+    from selfplaydrive.sim.reward_settings import check_env_params
 
     reward = reward if reward is not None else build_reward(cfg)
     node = cfg.env.get("params") if "env" in cfg else None
@@ -242,7 +242,7 @@ def make_env(
         reward: A conditioning sampler for the reward coefficients (default: the paper's
             training distributions; ignored when `spawner` is given), a
             `selfplaydrive.rewards.LinearReward` selecting the env's reward terms, or a
-            `selfplaydrive.rewards.settings.RewardSettings` (the ``reward`` group: sampler,
+            `selfplaydrive.sim.reward_settings.RewardSettings` (the ``reward`` group: sampler,
             terms, constants into `params`).
         obs: An `ObsConfig` (default: 63 objects, 200 road segments within 100 m).
         num_worlds: Worlds stepped together.
@@ -263,7 +263,7 @@ def make_env(
     items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
     from selfplaydrive.rewards.components import LinearReward
-    from selfplaydrive.rewards.settings import RewardSettings
+    from selfplaydrive.sim.reward_settings import RewardSettings
 
     if isinstance(reward, LinearReward):  # the terms, not the coefficients' sampler
         env_kwargs["reward"], reward = reward, None

@@ -208,7 +208,7 @@ def load_run_config(path: str | os.PathLike[str]) -> Any:
             "`selfplaydrive train` run (resolved_config.yaml)",
             path,
         )
-    from selfplaydrive.rewards.settings import upgrade_run_config
+    from selfplaydrive.sim.reward_settings import upgrade_run_config
 
     return upgrade_run_config(cfg)  # a config saved before the reward group held every setting
 

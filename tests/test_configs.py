@@ -15,7 +15,7 @@ from omegaconf import OmegaConf
 
 from selfplaydrive.builder import build_env, build_maps, build_spawner, compose, valid_options
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.rewards.settings import CONSTANTS
+from selfplaydrive.sim.reward_settings import CONSTANTS
 
 # arguments the builder or the trainer passes at run time, never from YAML
 _LOGGER_ARGS = {"run_dir", "total_updates", "progress_bar", "enabled", "initial"}

@@ -193,7 +193,7 @@ def test_run_config_of_the_old_layout_gives_the_same_trained_env(trained_run, tm
 
     from selfplaydrive.builder import compose
     from selfplaydrive.eval.app import resolve_target
-    from selfplaydrive.rewards.settings import CONSTANTS
+    from selfplaydrive.sim.reward_settings import CONSTANTS
 
     old = OmegaConf.load(trained_run / "resolved_config.yaml")
     for key in ("velocity_reward", "waypoint_reward", "terminate_threshold", "comfort_limit"):

@@ -26,7 +26,7 @@ class SimParams:
     The reward constants (comfort_limit, terminate_threshold, waypoint_reward, velocity_reward,
     velocity_min, center_max_angle_deg and the term shapes collision_speed_gain, center_bonus,
     center_bonus_offset, align_bonus) are kernel parameters kept here, but configs set them in
-    the ``reward`` group (`selfplaydrive.rewards.settings.RewardSettings`), which the builder
+    the ``reward`` group (`selfplaydrive.sim.reward_settings.RewardSettings`), which the builder
     copies into this object; so does `coeff_scale`, derived from the reward group's ranges.
 
     Attributes:

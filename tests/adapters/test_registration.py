@@ -41,8 +41,8 @@ def test_make_builds_the_single_agent_env(grid_map):
 def test_make_takes_the_reward_group(grid_map, kind):
     """`reward=`: a conditioning sampler goes to the spawner; `RewardSettings` (the reward
     group) also brings its constants and terms."""
-    from selfplaydrive.rewards.settings import RewardSettings
     from selfplaydrive.scenario.conditioning import ConditioningSampler
+    from selfplaydrive.sim.reward_settings import RewardSettings
 
     settings = RewardSettings(comfort=(0.0, 0.05), velocity_reward=0.01, terms={"velocity": 1.0})
     reward = settings if kind == "settings" else ConditioningSampler(comfort=(0.0, 0.05))

@@ -16,10 +16,10 @@ from selfplaydrive.builder import build_env, build_spawner, compose, make_env
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.physics import BicycleModel
 from selfplaydrive.rewards import TERM_NAMES
-from selfplaydrive.rewards.settings import CONSTANTS, RewardSettings
 from selfplaydrive.scenario.conditioning import ConditioningSampler
 from selfplaydrive.scenario.types import COEFF_NAMES
 from selfplaydrive.sim.params import COEFF_SCALE
+from selfplaydrive.sim.reward_settings import CONSTANTS, RewardSettings
 
 OLD_CONFIG = Path(__file__).resolve().parents[1] / "trainers" / "data" / "resolved_config_20eb9be.yaml"
 
@@ -145,7 +145,7 @@ def test_old_run_config_loads_with_its_settings():
 
 def test_upgrade_maps_every_old_key():
     """The old layout's three places become the reward node; a current config is unchanged."""
-    from selfplaydrive.rewards.settings import TARGET, upgrade_run_config
+    from selfplaydrive.sim.reward_settings import TARGET, upgrade_run_config
 
     sampler = "selfplaydrive.scenario.conditioning.ConditioningSampler"
     old = OmegaConf.create(

@@ -30,7 +30,7 @@ _CONSTANT_NAMES = (
 CONSTANTS: dict[str, float] = {name: float(getattr(SimParams(), name)) for name in _CONSTANT_NAMES}
 _POSITIVE = ("velocity_min", "center_max_angle_deg", "comfort_limit")
 _SAMPLER = "selfplaydrive.scenario.conditioning.ConditioningSampler"
-TARGET = "selfplaydrive.rewards.settings.RewardSettings"
+TARGET = "selfplaydrive.sim.reward_settings.RewardSettings"
 
 
 class RewardSettings:
