@@ -9,7 +9,7 @@ yet learned to steer is pushed towards stopping.
 
     python benchmarks/reward_landscape.py                      # the main job's settings
     python benchmarks/reward_landscape.py '~experiment'        # the paper's reward
-    python benchmarks/reward_landscape.py '~experiment' env.params.terminate_threshold=0
+    python benchmarks/reward_landscape.py '~experiment' reward.terminate_threshold=0
 
 With --rules it asks instead whether the reward pays for breaking a rule (paper sections 5.1,
 5.3; selfplaydrive/eval/rule_returns.py): the rule suites' scripted drivers (red light: wait,

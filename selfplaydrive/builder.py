@@ -2,8 +2,10 @@
 
 Every component is built from its `_target_` with `_convert_="all"`, so no `DictConfig` reaches
 Cython or torch, and a component's constructor arguments are its config schema. Values that one
-component shares with another are YAML interpolations (`spawner.conditioning: ${reward}`), so
-each setting has one source of truth.
+component shares with another have one source of truth: YAML interpolations
+(`env.params.light_min: ${spawner.lights.time_left.0}`), or the builder passes one group's
+object to another's constructor (the ``reward`` group's conditioning sampler to the spawner,
+its constants and observed-coefficient scale into `SimParams`: `build_reward`).
 """
 
 from __future__ import annotations
@@ -70,6 +72,10 @@ def config_error(exc: Exception, config_name: str, overrides: Sequence[str]) -> 
     hints = []
     for ov in overrides:
         key = ov.split("=", 1)[0].lstrip("+~")
+        moved = _moved_reward_key(key)
+        if moved:
+            hints.append(moved)
+            continue
         if key in GROUPS or "/" in key:
             opts = valid_options(key)
             if opts:
@@ -88,6 +94,16 @@ def config_error(exc: Exception, config_name: str, overrides: Sequence[str]) -> 
                     hints.append(f"valid keys under '{parent or '<root>'}': {', '.join(keys)}")
                     break
     return ConfigError(msg if not hints else f"{msg}\n" + "\n".join(hints))
+
+
+def _moved_reward_key(key: str) -> str:
+    """A hint when `key` is a reward constant under its old place ``env.params``, else ''."""
+    from selfplaydrive.sim.reward_settings import CONSTANTS
+
+    name = key.removeprefix("env.params.")
+    if name != key and name in CONSTANTS:
+        return f"'{key}' moved to the reward group: use reward.{name}=... (docs/rewards.md)"
+    return ""
 
 
 def instantiate(node: Any, **kwargs: Any) -> Any:
@@ -127,6 +143,46 @@ def build_maps(node: Any) -> list[RoadMap]:
     return maps
 
 
+def build_reward(cfg: Any) -> Any:
+    """The `RewardSettings` of a composed config's ``reward`` group (default: the paper's).
+
+    A saved config of the old layout (reward constants under ``env.params``) is upgraded first
+    (`selfplaydrive.sim.reward_settings.upgrade_run_config`).
+    """
+    from selfplaydrive.sim.reward_settings import RewardSettings, upgrade_run_config
+
+    if "reward" not in cfg or cfg.reward is None:
+        return RewardSettings()
+    upgrade_run_config(cfg)
+    settings = instantiate(cfg.reward)
+    if not isinstance(settings, RewardSettings):
+        raise ConfigError(
+            f"reward: expected a selfplaydrive.sim.reward_settings.RewardSettings node, "
+            f"got {type(settings).__name__}"
+        )
+    return settings
+
+
+def build_spawner(cfg: Any, reward: Any = None) -> Any:
+    """The spawner of `cfg.spawner`, drawing the coefficients of the ``reward`` group's sampler."""
+    reward = reward if reward is not None else build_reward(cfg)
+    return instantiate(cfg.spawner, conditioning=reward.conditioning)
+
+
+def build_params(cfg: Any, reward: Any = None) -> Any:
+    """`SimParams` of ``env.params`` with the ``reward`` group's constants and coefficient scale.
+
+    Raises:
+        ConfigError: ``env.params`` sets a reward constant (they live in ``reward``).
+    """
+    from selfplaydrive.sim.reward_settings import check_env_params
+
+    reward = reward if reward is not None else build_reward(cfg)
+    node = cfg.env.get("params") if "env" in cfg else None
+    check_env_params(node)
+    return reward.sim_params(instantiate(node) if node is not None else None)
+
+
 def build_env(cfg: Any, **overrides: Any) -> Any:
     """Build the `VecEnv` of a composed config (groups map, spawner, physics, reward, obs, env).
 
@@ -134,16 +190,18 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         cfg: The composed config.
         **overrides: Constructor arguments of `VecEnv` that replace the config's (e.g. hooks).
     """
+    reward = build_reward(cfg)
     # an override replaces the config's part without building it (e.g. `maps` given: the
     # config's map file is not read)
     parts = {
         "maps": lambda: build_maps(cfg.map),
-        "spawner": lambda: instantiate(cfg.spawner),
+        "spawner": lambda: build_spawner(cfg, reward),
         "physics": lambda: instantiate(cfg.physics.model),
         "obs": lambda: instantiate(cfg.obs),
+        "params": lambda: build_params(cfg, reward),
     }
-    if "terms" in cfg.get("reward", {}) and cfg.reward.terms is not None:
-        parts["reward"] = lambda: _linear_reward(cfg.reward.terms)
+    if reward.terms is not None:
+        parts["reward"] = reward.linear_reward
     kwargs = {k: make() for k, make in parts.items() if k not in overrides}
     kwargs.update(overrides)
     # --- physics components: a model with its own action space (physics/components.py, e.g.
@@ -154,18 +212,14 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         kwargs["actions"] = own
     # --- end physics components
     # objects are passed to the partial, not to instantiate: Hydra would turn a dataclass such
-    # as RoadMap into a structured config
-    return instantiate(cfg.env, _partial_=True)(**kwargs)
+    # as RoadMap into a structured config; env.params is built above (build_params)
+    from omegaconf import OmegaConf, open_dict
 
-
-def _linear_reward(terms: Any) -> Any:
-    """The env's `LinearReward` from the ``reward.terms`` mapping (term name -> weight)."""
-    from omegaconf import OmegaConf
-
-    from selfplaydrive.rewards.components import LinearReward
-
-    weights: Any = OmegaConf.to_container(terms, resolve=True) if OmegaConf.is_config(terms) else terms
-    return LinearReward(weights)  # it checks the mapping and names the bad key
+    env_node: Any = OmegaConf.create(OmegaConf.to_container(cfg.env, resolve=True))
+    with open_dict(env_node):
+        if "params" in env_node:
+            del env_node["params"]
+    return instantiate(env_node, _partial_=True)(**kwargs)
 
 
 def make_env(
@@ -186,8 +240,10 @@ def make_env(
             (default: `PaperSpawner` with `reward` as its conditioning sampler).
         physics: A physics model (default `FrictionBicycleModel()`).
         reward: A conditioning sampler for the reward coefficients (default: the paper's
-            training distributions; ignored when `spawner` is given), or a
-            `selfplaydrive.rewards.LinearReward` selecting the env's reward terms.
+            training distributions; ignored when `spawner` is given), a
+            `selfplaydrive.rewards.LinearReward` selecting the env's reward terms, or a
+            `selfplaydrive.sim.reward_settings.RewardSettings` (the ``reward`` group: sampler,
+            terms, constants into `params`).
         obs: An `ObsConfig` (default: 63 objects, 200 road segments within 100 m).
         num_worlds: Worlds stepped together.
         seed: Seed of the first reset.
@@ -207,9 +263,15 @@ def make_env(
     items: list[Any] = list(map) if isinstance(map, (list, tuple)) else [map]
     maps = [m if isinstance(m, RoadMap) else load_map(m) for m in items]
     from selfplaydrive.rewards.components import LinearReward
+    from selfplaydrive.sim.reward_settings import RewardSettings
 
     if isinstance(reward, LinearReward):  # the terms, not the coefficients' sampler
         env_kwargs["reward"], reward = reward, None
+    elif isinstance(reward, RewardSettings):  # everything the reward group holds
+        env_kwargs["params"] = reward.sim_params(env_kwargs.get("params"))
+        if reward.terms is not None:
+            env_kwargs["reward"] = reward.linear_reward()
+        reward = reward.conditioning
     if spawner is None:
         spawner = PaperSpawner(conditioning=reward) if reward is not None else PaperSpawner()
     return VecEnv(maps, spawner, num_worlds, physics=physics, obs=obs, seed=seed, **env_kwargs)

@@ -208,16 +208,20 @@ def load_run_config(path: str | os.PathLike[str]) -> Any:
             "`selfplaydrive train` run (resolved_config.yaml)",
             path,
         )
-    return cfg
+    from selfplaydrive.sim.reward_settings import upgrade_run_config
+
+    return upgrade_run_config(cfg)  # a config saved before the reward group held every setting
 
 
 def trained_env_kwargs(run_cfg: Any) -> dict[str, Any]:
     """`VecEnv` arguments that reproduce a training run's observation and action spaces.
 
     Taken from the run's config: `obs` (observation sizes and radius), `env.actions` (action
-    table), `env.params` (observation scales, time step, simulator parameters),
-    `env.terminated_vehicle` and `physics.model`. Not taken: the maps, the spawner (so not the
-    reward coefficients: evaluations set their own), `num_worlds`, threads and seed.
+    table), `env.params` (observation scales, time step, simulator parameters) with the
+    ``reward`` group's constants and observed-coefficient scale (derived from the training
+    ranges: the observation the policy learned on), `env.terminated_vehicle` and
+    `physics.model`. Not taken: the maps, the spawner and the coefficient distributions
+    (evaluations set their own), `num_worlds`, threads and seed.
 
     Args:
         run_cfg: The run's config (`load_run_config`).
@@ -225,14 +229,14 @@ def trained_env_kwargs(run_cfg: Any) -> dict[str, Any]:
     Returns:
         {"obs", "actions", "params", "physics", "terminated_vehicle"} (those present).
     """
-    from selfplaydrive.builder import instantiate
+    from selfplaydrive.builder import build_params, instantiate
 
     env = run_cfg.env
     kwargs: dict[str, Any] = {"obs": instantiate(run_cfg.obs)}
     if "actions" in env:
         kwargs["actions"] = instantiate(env.actions)
-    if "params" in env:
-        kwargs["params"] = instantiate(env.params)
+    if "params" in env or "reward" in run_cfg:
+        kwargs["params"] = build_params(run_cfg)
     if "terminated_vehicle" in env:
         kwargs["terminated_vehicle"] = str(env.terminated_vehicle)
     if "physics" in run_cfg and "model" in run_cfg.physics:

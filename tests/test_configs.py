@@ -13,8 +13,9 @@ import pytest
 from hydra.utils import get_object
 from omegaconf import OmegaConf
 
-from selfplaydrive.builder import build_env, build_maps, compose, valid_options
+from selfplaydrive.builder import build_env, build_maps, build_spawner, compose, valid_options
 from selfplaydrive.errors import ConfigError
+from selfplaydrive.sim.reward_settings import CONSTANTS
 
 # arguments the builder or the trainer passes at run time, never from YAML
 _LOGGER_ARGS = {"run_dir", "total_updates", "progress_bar", "enabled", "initial"}
@@ -29,6 +30,10 @@ BUILDER_ARGS = {
         "reward_hooks",
         "obs_hooks",
     },
+    # the reward group's constants and coefficient scale (builder.build_params)
+    "selfplaydrive.sim.params.SimParams": {*CONSTANTS, "coeff_scale"},
+    # the reward group's conditioning sampler (builder.build_spawner)
+    "selfplaydrive.scenario.spawner.PaperSpawner": {"conditioning"},
     "selfplaydrive.trainers.ppo.logging.TensorBoardLogger": _LOGGER_ARGS,
     "selfplaydrive.trainers.ppo.logging.JsonlLogger": _LOGGER_ARGS,
     "selfplaydrive.trainers.ppo.logging.ProgressLogger": _LOGGER_ARGS,
@@ -153,10 +158,10 @@ def test_sweep_syntax_reaches_the_sampler():
     """`reward.collision.high=0.5` (the documented sweep key) changes the drawn coefficients."""
     from selfplaydrive.builder import instantiate
 
-    lo = instantiate(compose("sim", ["reward.collision.high=0.5"]).reward)
-    hi = instantiate(compose("sim", ["reward.collision.high=1.0"]).reward)
+    lo = instantiate(compose("sim", ["reward.collision.high=0.5"]).reward).conditioning
+    hi = instantiate(compose("sim", ["reward.collision.high=1.0"]).reward).conditioning
     assert lo.collision == (0.0, 0.5) and hi.collision == (0.0, 1.0)
-    spawner = instantiate(compose("sim", ["reward.collision.high=0.5"]).spawner)
+    spawner = build_spawner(compose("sim", ["reward.collision.high=0.5"]))
     assert spawner.conditioning.collision == (0.0, 0.5)
 
 

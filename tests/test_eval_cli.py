@@ -4,6 +4,7 @@ coefficients, checkpoint errors that name the file, the diversity analysis and t
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
@@ -28,7 +29,7 @@ def eval_vector() -> np.ndarray:
     from selfplaydrive.builder import instantiate
 
     node = OmegaConf.load(Path(selfplaydrive.conf.__file__).parent / "reward" / "eval.yaml")
-    return instantiate(node).eval_vector()
+    return instantiate(node).conditioning.eval_vector()
 
 
 @pytest.fixture(scope="module")
@@ -183,6 +184,32 @@ def test_checkpoint_without_run_folder_needs_run_config(trained_run, tmp_path):
     env = EvalEnvFactory(maps, target)(PaperSpawner(num_agents=2), 1)
     assert env.layout.obs_dim == target.obs_dim
     assert env.layout.max_objects == TRAINED["max_objects"]
+
+
+def test_run_config_of_the_old_layout_gives_the_same_trained_env(trained_run, tmp_path):
+    """A resolved_config.yaml written before the reward group held every reward setting
+    (constants under env.params, the sampler in spawner.conditioning) rebuilds the same env."""
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.builder import compose
+    from selfplaydrive.eval.app import resolve_target
+    from selfplaydrive.sim.reward_settings import CONSTANTS
+
+    old = OmegaConf.load(trained_run / "resolved_config.yaml")
+    for key in ("velocity_reward", "waypoint_reward", "terminate_threshold", "comfort_limit"):
+        old.env.params[key] = old.reward.pop(key)
+    old.env.params.velocity_reward = 0.03  # a value the new layout's defaults do not have
+    for key in set(CONSTANTS) - set(old.env.params):
+        old.reward.pop(key)
+    old.reward._target_ = "selfplaydrive.scenario.conditioning.ConditioningSampler"
+    old.spawner.conditioning = OmegaConf.masked_copy(old.reward, [k for k in old.reward if k != "terms"])
+    OmegaConf.save(old, tmp_path / "old.yaml")
+    ckpt = trained_run / "checkpoints" / "final.pt"
+    new = resolve_target(compose("eval", [f"policy={ckpt}"])).env_kwargs["params"]
+    with pytest.warns(UserWarning, match=r"old layout.*env.params.velocity_reward -> reward.velocity_reward"):
+        got = resolve_target(compose("eval", [f"policy={ckpt}", f"run_config={tmp_path / 'old.yaml'}"]))
+    assert got.env_kwargs["params"] == dataclasses.replace(new, velocity_reward=0.03)
+    assert got.env_kwargs["params"].wp_scale == TRAINED["wp_scale"]
 
 
 @pytest.mark.parametrize("kind", ["missing", "text", "foreign_torch", "directory"])

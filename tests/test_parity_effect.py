@@ -88,12 +88,9 @@ NO_KERNEL_EFFECT = {
             "align_low_prob",
         )
     },
+    # (the ends of waypoint_radius and center_bias and, in train mode, the eval values act
+    # through the observed-coefficient scale: max |value| of either mode, RewardSettings)
     ("reward", "eval", "reward.waypoint_radius.low"): "eval mode uses eval_waypoint_radius",
-    ("reward", "eval", "reward.waypoint_radius.high"): "eval mode uses eval_waypoint_radius",
-    ("reward", "eval", "reward.center_bias.low"): "eval mode uses eval_center_bias",
-    ("reward", "eval", "reward.center_bias.high"): "eval mode uses eval_center_bias",
-    ("reward", "paper", "reward.eval_waypoint_radius"): "read in eval mode only (tested under reward=eval)",
-    ("reward", "paper", "reward.eval_center_bias"): "read in eval mode only (tested under reward=eval)",
     # the Tartu map needs $SELFPLAYDRIVE_SHARED_MAPS; its one key is load_map's spec, tested
     # under map=default and map=file
     ("map", "tartu", "map.spec"): "needs the shared maps; same key as map=file",
@@ -154,7 +151,7 @@ SPECIAL = {
     # a Python encoder defined in a file (a test module's): the swap the option is for
     "obs.target": [f"{Path(__file__).parent / 'obs' / 'test_obs_encoders.py'}:SpeedOnly"],
     "env.params.pedestrian_end": ["stand", "vanish"],
-    "env.params.terminate_threshold": [0.05, 1.0],
+    "reward.terminate_threshold": [0.05, 1.0],
 }
 
 
@@ -191,7 +188,7 @@ def kernel_view(env) -> dict[str, str]:
 
 def _leaves(cfg, node_path: str, skip: str | None = None):
     """(dotted key, value) of every leaf under `node_path`: lists are leaves, `_target_` and
-    `_partial_` are not keys; interpolations to a whole node (spawner.conditioning: ${reward})
+    `_partial_` are not keys; interpolations to a whole node (spawner.hidden: ${physics.hidden})
     are tested at their source, scalar ones (env.seed: ${seed}) with their resolved value."""
     node = OmegaConf.select(cfg, node_path)
     for key in node.keys():

@@ -125,9 +125,10 @@ cdef inline void agent_terms(const Sim* sim, const Params* prm, int i, float* t)
     cdef unsigned char ev = sim.events[i]
     cdef const float* cf = &sim.coeffs[i * NUM_COEFFS]
     cdef float v = sim.speed[i], al, ca, dev
+    cdef double gain = prm.collision_speed_gain  # double: the product rounds as the paper's 0.1 did
     t[T_WAYPOINT] = prm.waypoint_reward if ev & EV_WAYPOINT else 0.0
-    t[T_COLLISION] = -cf[C_COLLISION] * (1.0 + 0.1 * v) if ev & (EV_COLLIDE | EV_PED) else 0.0
-    t[T_OFFROAD] = -cf[C_OFFROAD] * (1.0 + 0.1 * v) if ev & EV_OFFROAD else 0.0
+    t[T_COLLISION] = -cf[C_COLLISION] * (1.0 + gain * v) if ev & (EV_COLLIDE | EV_PED) else 0.0
+    t[T_OFFROAD] = -cf[C_OFFROAD] * (1.0 + gain * v) if ev & EV_OFFROAD else 0.0
     t[T_RED] = -cf[C_RED] if ev & EV_RED else 0.0
     t[T_COMFORT] = -cf[C_COMFORT] if ev & EV_COMFORT else 0.0
     t[T_CENTER] = 0.0
@@ -139,8 +140,8 @@ cdef inline void agent_terms(const Sim* sim, const Params* prm, int i, float* t)
     ca = cosf(al)
     if fabs(al) < prm.center_max_angle:
         dev = fabs(cf[C_BIAS] - sim.lane_s[i])
-        t[T_CENTER] = cf[C_CENTER] * (-dev + 0.05 / expf(dev - <float>0.5))
-    t[T_ALIGN] = cf[C_ALIGN] * (min(ca, 0.0) + 0.0025 * (1.0 - fabs(al) / (0.5 * M_PI)))
+        t[T_CENTER] = cf[C_CENTER] * (-dev + prm.center_bonus / expf(dev - prm.center_bonus_offset))
+    t[T_ALIGN] = cf[C_ALIGN] * (min(ca, 0.0) + prm.align_bonus * (1.0 - fabs(al) / (0.5 * M_PI)))
     if v >= prm.velocity_min:
         t[T_VELOCITY] = prm.velocity_reward * max(ca, 0.0)
 
@@ -152,7 +153,7 @@ cdef inline void agent_terms(const Sim* sim, const Params* prm, int i, float* t)
 
 cdef void term_waypoint(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                         int32_t w, float* out, int32_t stride) noexcept nogil:
-    """R = 0.25 when the current waypoint was reached this step."""
+    """R = waypoint_reward (0.25) when the current waypoint was reached this step."""
     cdef int a, A = sim.A
     cdef const uint8_t* active = sim.active + <int64_t>w * A
     cdef const uint8_t* ev = sim.events + <int64_t>w * A
@@ -164,33 +165,36 @@ cdef void term_waypoint(const Sim* sim, const Params* prm, const Atlas* atlas, c
 
 cdef void term_collision(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                          int32_t w, float* out, int32_t stride) noexcept nogil:
-    """R = -C_collision (1 + 0.1 v) when the box overlaps a vehicle or a pedestrian."""
+    """R = -C_collision (1 + g v) when the box overlaps a vehicle or a pedestrian (g =
+    collision_speed_gain, 0.1)."""
     cdef int a, A = sim.A
     cdef const uint8_t* active = sim.active + <int64_t>w * A
     cdef const uint8_t* ev = sim.events + <int64_t>w * A
     cdef const float* speed = sim.speed + <int64_t>w * A
     cdef const float* cf = sim.coeffs + <int64_t>w * A * NUM_COEFFS + C_COLLISION
     cdef float v
+    cdef double gain = prm.collision_speed_gain
     for a in range(A):
         if active[a]:
             v = speed[a]
-            out[<int64_t>a * stride] = (-cf[a * NUM_COEFFS] * (1.0 + 0.1 * v)
+            out[<int64_t>a * stride] = (-cf[a * NUM_COEFFS] * (1.0 + gain * v)
                                         if ev[a] & (EV_COLLIDE | EV_PED) else 0.0)
 
 
 cdef void term_offroad(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                        int32_t w, float* out, int32_t stride) noexcept nogil:
-    """R = -C_offroad (1 + 0.1 v) when the box touches a road edge."""
+    """R = -C_offroad (1 + g v) when the box touches a road edge (g = collision_speed_gain)."""
     cdef int a, A = sim.A
     cdef const uint8_t* active = sim.active + <int64_t>w * A
     cdef const uint8_t* ev = sim.events + <int64_t>w * A
     cdef const float* speed = sim.speed + <int64_t>w * A
     cdef const float* cf = sim.coeffs + <int64_t>w * A * NUM_COEFFS + C_OFFROAD
     cdef float v
+    cdef double gain = prm.collision_speed_gain
     for a in range(A):
         if active[a]:
             v = speed[a]
-            out[<int64_t>a * stride] = (-cf[a * NUM_COEFFS] * (1.0 + 0.1 * v)
+            out[<int64_t>a * stride] = (-cf[a * NUM_COEFFS] * (1.0 + gain * v)
                                         if ev[a] & EV_OFFROAD else 0.0)
 
 
@@ -220,33 +224,37 @@ cdef void term_comfort(const Sim* sim, const Params* prm, const Atlas* atlas, co
 
 cdef void term_center(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                       int32_t w, float* out, int32_t stride) noexcept nogil:
-    """R = C_center (-|B - s| + 0.05 / exp(|B - s| - 0.5)) when |alpha| < 60 deg."""
+    """R = C_center (-|B - s| + 0.05 / exp(|B - s| - 0.5)) when |alpha| < 60 deg (0.05:
+    center_bonus, 0.5: center_bonus_offset, 60 deg: center_max_angle)."""
     cdef int a, A = sim.A
     cdef const uint8_t* active = sim.active + <int64_t>w * A
     cdef const uint8_t* valid = sim.lane_valid + <int64_t>w * A
     cdef const float* alpha = sim.lane_alpha + <int64_t>w * A
     cdef const float* lane_s = sim.lane_s + <int64_t>w * A
     cdef const float* cf = sim.coeffs + <int64_t>w * A * NUM_COEFFS
-    cdef float max_angle = prm.center_max_angle, dev, t
+    cdef float max_angle = prm.center_max_angle, dev, t, off = prm.center_bonus_offset
+    cdef double bonus = prm.center_bonus
     for a in range(A):
         if not active[a]:
             continue
         t = 0.0  # no centerline within lane_radius: the lane terms are zero
         if valid[a] and fabs(alpha[a]) < max_angle:
             dev = fabs(cf[a * NUM_COEFFS + C_BIAS] - lane_s[a])
-            t = cf[a * NUM_COEFFS + C_CENTER] * (-dev + 0.05 / expf(dev - <float>0.5))
+            t = cf[a * NUM_COEFFS + C_CENTER] * (-dev + bonus / expf(dev - off))
         out[<int64_t>a * stride] = t
 
 
 cdef void term_align(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                      int32_t w, float* out, int32_t stride) noexcept nogil:
-    """R = C_align (min(cos alpha, 0) + 0.0025 (1 - |alpha| / (pi / 2))) when a lane is associated."""
+    """R = C_align (min(cos alpha, 0) + 0.0025 (1 - |alpha| / (pi / 2))) when a lane is associated
+    (0.0025: align_bonus)."""
     cdef int a, A = sim.A
     cdef const uint8_t* active = sim.active + <int64_t>w * A
     cdef const uint8_t* valid = sim.lane_valid + <int64_t>w * A
     cdef const float* alpha = sim.lane_alpha + <int64_t>w * A
     cdef const float* cf = sim.coeffs + <int64_t>w * A * NUM_COEFFS + C_ALIGN
     cdef float al, ca, t
+    cdef double bonus = prm.align_bonus
     for a in range(A):
         if not active[a]:
             continue
@@ -254,7 +262,7 @@ cdef void term_align(const Sim* sim, const Params* prm, const Atlas* atlas, cons
         if valid[a]:
             al = alpha[a]
             ca = cosf(al)
-            t = cf[a * NUM_COEFFS] * (min(ca, 0.0) + 0.0025 * (1.0 - fabs(al) / (0.5 * M_PI)))
+            t = cf[a * NUM_COEFFS] * (min(ca, 0.0) + bonus * (1.0 - fabs(al) / (0.5 * M_PI)))
         out[<int64_t>a * stride] = t
 
 

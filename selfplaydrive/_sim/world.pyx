@@ -241,6 +241,8 @@ cdef class World:
         self.prm.inv_width_scale = 1.0 / self.prm.width_scale
         self.prm.inv_lateral_scale = 1.0 / self.prm.lateral_scale
         self.prm.inv_max_speed = 1.0 / self.prm.max_speed
+        self.prm.collision_speed_gain = p["collision_speed_gain"]; self.prm.center_bonus = p["center_bonus"]
+        self.prm.center_bonus_offset = p["center_bonus_offset"]; self.prm.align_bonus = p["align_bonus"]
 
     def step(self, int num_threads=1, bint profile=False, int chunk=0):
         """Advance every world one step; with `profile`, stage by stage with timings. `chunk`:

@@ -119,11 +119,16 @@ def _native(map: Any, spawner: Any, num_worlds: int, seed: int, kwargs: dict[str
     from selfplaydrive.builder import make_env
 
     if spawner is None or isinstance(spawner, dict):
+        from selfplaydrive.rewards.components import LinearReward
         from selfplaydrive.scenario.spawner import PaperSpawner
 
         args = dict(spawner or {})
-        reward = kwargs.pop("reward", None)
-        if reward is not None:
-            args.setdefault("conditioning", reward)
+        reward = kwargs.get("reward")
+        if reward is not None and not isinstance(reward, LinearReward):
+            # a RewardSettings (the reward group) stays for make_env: its terms and constants
+            sampler = getattr(reward, "conditioning", None)
+            if sampler is None:
+                sampler = kwargs.pop("reward")
+            args.setdefault("conditioning", sampler)
         spawner = PaperSpawner(**args)
     return make_env(map, spawner=spawner, num_worlds=num_worlds, seed=seed, **kwargs)

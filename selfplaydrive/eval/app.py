@@ -313,9 +313,9 @@ def _training_spawner(target: EvalTarget) -> Any:
 
     if target.run_config is None or "spawner" not in target.run_config:
         return PaperSpawner()
-    from selfplaydrive.builder import instantiate
+    from selfplaydrive.builder import build_spawner
 
-    return instantiate(target.run_config.spawner)
+    return build_spawner(target.run_config)  # with the run's reward group's sampler
 
 
 RUNNERS = {"suites": _run_suites, "longform": _run_longform, "diversity": _run_diversity}

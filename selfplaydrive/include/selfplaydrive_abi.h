@@ -162,6 +162,11 @@ typedef struct sd_params {
     float inv_width_scale;
     float inv_lateral_scale;
     float inv_max_speed;
+                                  /* shapes of the reward terms (section 2.3; the reward group's keys, docs/rewards.md) */
+    double collision_speed_gain;  /* [s/m] collision and road-edge penalties scale with (1 + gain v) (0.1) */
+    double center_bonus;          /* height of the centre term's bonus center_bonus / exp(|B - s| - offset) (0.05) */
+    float center_bonus_offset;    /* [m] offset of that bonus (0.5) */
+    double align_bonus;           /* align term's bonus align_bonus (1 - |alpha| / (pi / 2)) (0.0025) */
 } sd_params;
 
 typedef struct sd_sim {

@@ -120,6 +120,10 @@ cdef extern from "selfplaydrive_abi.h" nogil:
         float inv_width_scale
         float inv_lateral_scale
         float inv_max_speed
+        double collision_speed_gain
+        double center_bonus
+        float center_bonus_offset
+        double align_bonus
 
     ctypedef struct Sim "sd_sim":
         int W

@@ -63,10 +63,6 @@ class ConditioningSampler:
         align_low_prob: Probability of the low mode of C_align.
         eval_waypoint_radius: D [m] in eval mode.
         eval_center_bias: B [m] in eval mode.
-        terms: The reward terms these coefficients condition and their weights (term name ->
-            weight, `selfplaydrive.rewards.LinearReward`), kept here so that the Hydra
-            ``reward`` group selects both; the sampler itself does not use them. None: the
-            paper's eight terms with weight 1. The builder passes them to the env.
 
     Raises:
         ConfigError: On an unknown mode, a malformed range or a probability outside [0, 1].
@@ -89,7 +85,6 @@ class ConditioningSampler:
         align_low_prob: float = 0.5,
         eval_waypoint_radius: float = 3.0,
         eval_center_bias: float = 0.0,
-        terms: Mapping[str, float] | None = None,
     ) -> None:
         if mode not in _MODES:
             raise ConfigError(f"ConditioningSampler mode must be one of {_MODES}, got {mode!r}")
@@ -115,9 +110,6 @@ class ConditioningSampler:
             )
         self.eval_waypoint_radius = float(eval_waypoint_radius)
         self.eval_center_bias = float(eval_center_bias)
-        if terms is not None and not isinstance(terms, Mapping):
-            raise ConfigError(f"reward.terms: expected a mapping of term name -> weight, got {terms!r}")
-        self.terms = dict(terms) if terms is not None else None
         self._lo, self._hi = self._lo_hi()  # the ranges are fixed at construction
 
     def eval_vector(self) -> np.ndarray:
@@ -133,6 +125,28 @@ class ConditioningSampler:
             "align": max(self.align_low[1], self.align_high[1]),
         }
         return np.array([values[name] for name in COEFF_NAMES], dtype=np.float32)
+
+    def observation_scale(self) -> tuple[float, ...]:
+        """The observation scale of each coefficient (`COEFF_NAMES` order, section 2.5).
+
+        The largest magnitude the sampler can give: max |end| over the coefficient's range(s)
+        (both modes of C_center and C_align) and its eval-mode value, so the observed
+        coefficient `value / scale` lies in [-1, 1] for every sweep of the ranges. A coefficient
+        fixed at 0 gets scale 1 (it is observed as 0). With the paper's ranges this is
+        (3, 1, 1, 1, 0.01, 2.5e-3, 0.3, 2.5e-2), `selfplaydrive.sim.params.COEFF_SCALE`.
+        """
+        ends = {
+            "waypoint_radius": (*self.waypoint_radius, self.eval_waypoint_radius),
+            "collision": self.collision,
+            "offroad": self.offroad,
+            "red_light": self.red_light,
+            "comfort": self.comfort,
+            "center": (*self.center_low, *self.center_high),
+            "center_bias": (*self.center_bias, self.eval_center_bias),
+            "align": (*self.align_low, *self.align_high),
+        }
+        scale = [max(abs(float(v)) for v in ends[name]) for name in COEFF_NAMES]
+        return tuple(s if s > 0 else 1.0 for s in scale)
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Coefficients for `n` agents.

@@ -140,7 +140,7 @@ class VecEnv:
         self._external_physics = bool(getattr(self.physics, "external", False))
         self.action_table = self.physics.resolve_actions(actions)
         # --- end physics component
-        self.params = params if params is not None else SimParams()
+        self.params = _with_coeff_scale(params if params is not None else SimParams(), spawner)
         # ---- observation encoder (issue #13) ----
         # the read-only road data of the maps, shared by all worlds; an encoder that needs map
         # data of its own takes it from the maps and the atlas here (obs/encoders.py bind_encoder)
@@ -687,3 +687,13 @@ def _box(layout: ObsLayout):
 
     low, high = layout.bounds()
     return gym.spaces.Box(low, high, dtype=np.float32)
+
+
+def _with_coeff_scale(params: SimParams, spawner: object) -> SimParams:
+    """`params` with its observed-coefficient scale set (section 2.5): kept when given, else
+    derived from the spawner's conditioning sampler (`ConditioningSampler.observation_scale`),
+    so a sweep of the coefficient ranges rescales the observation instead of saturating it."""
+    scale = getattr(getattr(spawner, "conditioning", None), "observation_scale", None)
+    if params.coeff_scale is not None or not callable(scale):
+        return params
+    return dataclasses.replace(params, coeff_scale=tuple(scale()))

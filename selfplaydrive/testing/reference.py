@@ -7,6 +7,7 @@ Each function documents the same rule as its kernel; none shares code with it.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -197,23 +198,32 @@ def light_step(state, time_left, key: int, counter: int, dt=0.1, light_min=0.5, 
 
 
 def reward_terms(
-    events: dict[str, bool], v: float, coeffs: dict[str, float], lane: tuple[bool, float, float]
+    events: dict[str, bool],
+    v: float,
+    coeffs: dict[str, float],
+    lane: tuple[bool, float, float],
+    params: Any = None,
 ) -> np.ndarray:
-    """The eight terms of section 2.3 in the order of rewards.registry.TERM_NAMES."""
+    """The eight terms of section 2.3 in the order of rewards.registry.TERM_NAMES, with the
+    reward constants of `params` (a `SimParams`; None: the paper's, 0.25, 0.1, 0.05, ...)."""
+    from selfplaydrive.sim.params import SimParams
+
+    p = params if params is not None else SimParams()
     valid, s, alpha = lane
     t = np.zeros(8)
-    t[0] = 0.25 if events.get("waypoint") else 0.0
-    t[1] = -coeffs["collision"] * (1 + 0.1 * v) if events.get("collision") else 0.0
-    t[2] = -coeffs["offroad"] * (1 + 0.1 * v) if events.get("offroad") else 0.0
+    t[0] = p.waypoint_reward if events.get("waypoint") else 0.0
+    t[1] = -coeffs["collision"] * (1 + p.collision_speed_gain * v) if events.get("collision") else 0.0
+    t[2] = -coeffs["offroad"] * (1 + p.collision_speed_gain * v) if events.get("offroad") else 0.0
     t[3] = -coeffs["red_light"] if events.get("red_light") else 0.0
     t[4] = -coeffs["comfort"] if events.get("comfort") else 0.0
     if valid:
         dev = abs(coeffs["center_bias"] - s)
-        if abs(alpha) < math.radians(60):
-            t[5] = coeffs["center"] * (-dev + 0.05 / math.exp(dev - 0.5))
-        t[6] = coeffs["align"] * (min(math.cos(alpha), 0.0) + 0.0025 * (1 - abs(alpha) / (math.pi / 2)))
-        if v >= 2.5:
-            t[7] = 2.5e-4 * max(math.cos(alpha), 0.0)
+        if abs(alpha) < math.radians(p.center_max_angle_deg):
+            t[5] = coeffs["center"] * (-dev + p.center_bonus / math.exp(dev - p.center_bonus_offset))
+        bonus = p.align_bonus * (1 - abs(alpha) / (math.pi / 2))
+        t[6] = coeffs["align"] * (min(math.cos(alpha), 0.0) + bonus)
+        if v >= p.velocity_min:
+            t[7] = p.velocity_reward * max(math.cos(alpha), 0.0)
     return t
 
 

@@ -37,6 +37,21 @@ def test_make_builds_the_single_agent_env(grid_map):
     env.close()
 
 
+@pytest.mark.parametrize("kind", ["sampler", "settings"])
+def test_make_takes_the_reward_group(grid_map, kind):
+    """`reward=`: a conditioning sampler goes to the spawner; `RewardSettings` (the reward
+    group) also brings its constants and terms."""
+    from selfplaydrive.scenario.conditioning import ConditioningSampler
+    from selfplaydrive.sim.reward_settings import RewardSettings
+
+    settings = RewardSettings(comfort=(0.0, 0.05), velocity_reward=0.01, terms={"velocity": 1.0})
+    reward = settings if kind == "settings" else ConditioningSampler(comfort=(0.0, 0.05))
+    env = gym.make(SINGLE_AGENT_ID, map=grid_map, spawner=SMALL, others="static", reward=reward).unwrapped.env
+    assert env.spawner.conditioning.comfort == (0.0, 0.05) and env.params.coeff_scale[4] == 0.05
+    want = (0.01, ("velocity",)) if kind == "settings" else (2.5e-4, tuple(env.term_names))
+    assert (env.params.velocity_reward, tuple(env.term_names)) == want
+
+
 def test_make_vec_of_the_single_agent_id_uses_gymnasiums_vectorization(grid_map):
     venv = gym.make_vec(SINGLE_AGENT_ID, num_envs=2, map=grid_map, spawner=SMALL, others="static")
     assert isinstance(venv, gym.vector.SyncVectorEnv) and venv.num_envs == 2

@@ -12,7 +12,7 @@ from selfplaydrive.physics import BicycleModel, FrictionBicycleModel
 from selfplaydrive.rewards import TERM_NAMES
 from selfplaydrive.scenario.types import COEFF_NAMES
 from selfplaydrive.sim import VecEnv
-from selfplaydrive.sim.params import COEFF_SCALE
+from selfplaydrive.sim.params import COEFF_SCALE, SimParams
 from selfplaydrive.testing import reference as ref
 
 
@@ -104,8 +104,16 @@ def test_collisions_match_reference(cmap):
     del rng
 
 
-def test_lane_association_offroad_and_rewards_match_reference(cmap):
-    env = random_env(cmap, FrictionBicycleModel(), 11)
+# the reward group's constants away from the paper's (reward.*: docs/rewards.md)
+OTHER_REWARD = SimParams(
+    waypoint_reward=0.7, velocity_reward=0.01, velocity_min=1.0, center_max_angle_deg=30.0,
+    collision_speed_gain=0.3, center_bonus=0.2, center_bonus_offset=1.0, align_bonus=0.01,
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("params", [None, OTHER_REWARD], ids=["paper", "other"])
+def test_lane_association_offroad_and_rewards_match_reference(cmap, params):
+    env = random_env(cmap, FrictionBicycleModel(), 11, params=params)
     rng = np.random.default_rng(2)
     b = env.buffers
     names = list(COEFF_NAMES)
@@ -131,7 +139,7 @@ def test_lane_association_offroad_and_rewards_match_reference(cmap):
             )
             coeffs = dict(zip(names, b["coeffs"][i].astype(np.float64), strict=True))
             lane_k = (bool(b["lane_valid"][i]), float(b["lane_s"][i]), float(b["lane_alpha"][i]))
-            want = ref.reward_terms(events, float(b["speed"][i]), coeffs, lane_k)
+            want = ref.reward_terms(events, float(b["speed"][i]), coeffs, lane_k, params)
             np.testing.assert_allclose(
                 env.reward_terms[i], want, rtol=1e-4, atol=1e-7, err_msg=str(TERM_NAMES)
             )
