@@ -211,6 +211,7 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
     if own is not None and "actions" not in overrides:
         kwargs["actions"] = own
     # --- end physics components
+    _warn_unobserved_rules(kwargs.get("reward"), kwargs.get("obs"))
     # objects are passed to the partial, not to instantiate: Hydra would turn a dataclass such
     # as RoadMap into a structured config; env.params is built above (build_params)
     from omegaconf import OmegaConf, open_dict
@@ -220,6 +221,28 @@ def build_env(cfg: Any, **overrides: Any) -> Any:
         if "params" in env_node:
             del env_node["params"]
     return instantiate(env_node, _partial_=True)(**kwargs)
+
+
+# reward terms whose state only obs=rules shows (issue #15 item 1): STOP vs YIELD line types
+# and crosswalk occupancy (docs/observation.md "Traffic-rule features")
+RULES_OBSERVED = ("stop_sign", "crosswalk_yield")
+
+
+def _warn_unobserved_rules(reward: Any, obs: Any) -> None:
+    """Warn when a selected rule term depends on state the chosen encoder does not show."""
+    import warnings
+
+    from selfplaydrive.obs.rules import RulesEncoder
+
+    names = [n for n in getattr(reward, "names", ()) if n in RULES_OBSERVED]
+    if names and obs is not None and not isinstance(obs, RulesEncoder):
+        warnings.warn(
+            f"reward terms {names} are selected but the observation encoder "
+            f"{getattr(obs, 'name', 'paper')!r} does not show STOP/YIELD line types or "
+            "crosswalk occupancy; select obs=rules (the fix_* experiments do)",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
 def make_env(

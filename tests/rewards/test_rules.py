@@ -365,3 +365,17 @@ def test_numba_view_has_the_term_state_fields():
 
     assert SIM.phys_state < SIM.term_state_dim < SIM.term_state  # appended after phys_state
     assert struct_dtype("sim").itemsize == abi_sizes()["sim"]
+
+
+def test_rule_terms_without_their_observation_warn():
+    """stop_sign / crosswalk_yield depend on state only obs=rules shows (issue #15 item 1)."""
+    import warnings
+
+    from selfplaydrive.builder import build_env, compose
+
+    with pytest.warns(UserWarning, match=r"\['stop_sign'\] are selected .* select obs=rules"):
+        build_env(compose("train", ["+reward.terms.stop_sign=1.0", "env.num_worlds=1"]))
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message="reward terms")
+        build_env(compose("train", ["+reward.terms.stop_sign=1.0", "obs=rules", "env.num_worlds=1"]))
+        build_env(compose("train", ["+reward.terms.red_intersection=1.0", "env.num_worlds=1"]))
