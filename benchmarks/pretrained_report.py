@@ -94,7 +94,10 @@ def cli_eval(map_name: str, eval_name: str, run_dir: Path, seed: int) -> dict[st
     return {
         "command": "selfplaydrive " + " ".join(args),
         "wall_s": round(time.perf_counter() - start, 1),
-        "turn_lanes": {k: turn[k] for k in ("numerator", "denominator", "value", "lo", "hi")},
+        "turn_lanes": {
+            "requested": suites["turn_lanes"]["requested"],
+            **{k: turn[k] for k in ("numerator", "denominator", "value", "lo", "hi")},
+        },
         "suites": {name: r["summary"] for name, r in suites.items()},
         "longform": {
             k: longform[k]
@@ -139,6 +142,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"{meta.get('slot_steps')} slot-steps ({meta.get('agent_steps')} agent-steps) of "
         f"`{meta.get('command', '?')}`.",
         "",
+        *training_lines(meta),
     ]
     for name, rep in report["maps"].items():
         lines += [f"## map={name}", ""]
@@ -167,7 +171,8 @@ def markdown(report: dict[str, Any]) -> str:
             f"`{ev['command']}` ({ev['wall_s']} s):",
             "",
             f"- turn-lane suite: {turn['numerator']}/{turn['denominator']} correct lanes "
-            f"(95 % interval {pct(turn['lo'])} - {pct(turn['hi'])});",
+            f"(95 % interval {pct(turn['lo'])} - {pct(turn['hi'])}; {turn['requested']} scenarios asked for, "
+            f"{turn['denominator']} found on the map);",
             f"- long-form: {lf['km']:.2f} km, {lf['incidents']} incidents (collisions and road-edge "
             f"contacts), {kbi['value']:.3f} km between incidents (95 % interval {kbi['lo']:.3f} - "
             f"{kbi['hi']:.3f}), mean speed {lf['mean_speed_kmh']:.1f} km/h.",
@@ -177,17 +182,27 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def training_lines(meta: dict[str, Any]) -> list[str]:
+    """How the shipped policy was trained, from `main_job.json`."""
+    keys = ("command", "invocation", "seed", "start_utc", "end_utc", "duration_s", "machine", "git_commit")
+    rows = [f"| {k} | `{meta[k]}` |" for k in keys if k in meta]
+    counts = ("update", "slot_steps", "agent_steps", "size_bytes")
+    rows += [f"| {k} | {meta[k]} |" for k in counts if k in meta]
+    return ["## Training", "", "| | |", "|---|---|", *rows, ""]
+
+
 def target_lines(report: dict[str, Any]) -> list[str]:
     """One line per map and target: measured, target, met or short by how much."""
     out = []
     for name, rep in report["maps"].items():
         if "skipped" in rep:
             continue
-        best = max(r.get("waypoint_completion", 0.0) for r in rep["completion"])
+        rates = [r.get("waypoint_completion", 0.0) for r in rep["completion"]]
+        best, worst = max(rates), min(rates)
         turn = rep["eval"]["turn_lanes"]
         kbi = rep["eval"]["longform"]["km_between_incidents"]["value"]
         for label, got, want, fmt in (
-            ("waypoint completion (best row)", best, TARGETS["waypoint_completion"], pct),
+            (f"completion (best row; worst {pct(worst)})", best, TARGETS["waypoint_completion"], pct),
             ("km between incidents", kbi, TARGETS["km_between_incidents"], lambda v: f"{v:.3f} km"),
             ("turn lanes correct", turn["value"], TARGETS["turn_lanes_correct"], pct),
         ):
