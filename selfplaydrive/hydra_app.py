@@ -8,6 +8,7 @@ import json
 import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from selfplaydrive.builder import CONFIG_MODULE, compose
@@ -225,16 +226,38 @@ def cmd_eval(argv: Sequence[str]) -> int:
     return run_hydra("eval", eval_task, argv)
 
 
+def render_driver(cfg: Any) -> str:
+    """What drives `selfplaydrive render`: `policy` when set (as in `selfplaydrive eval`), else
+    `driver`; "pretrained" becomes the shipped checkpoint's path (`selfplaydrive.pretrained`)."""
+    from selfplaydrive.pretrained import resolve_spec
+
+    policy = cfg.get("policy")
+    return resolve_spec(str(cfg.driver if policy is None else policy))
+
+
+def checkpoint_env_kwargs(driver: str) -> dict[str, Any]:
+    """`VecEnv` arguments of the env a checkpoint was trained in (observation sizes, action
+    table, scales, physics: `policies.trained_env_kwargs`), from the run config next to it;
+    empty for a built-in driver or a checkpoint without one (the render config's env is used)."""
+    from selfplaydrive.policies import find_run_config, is_builtin, load_run_config, trained_env_kwargs
+
+    if is_builtin(driver) or not Path(driver).is_file():
+        return {}
+    cfg_file = find_run_config(driver)
+    return {} if cfg_file is None else trained_env_kwargs(load_run_config(cfg_file))
+
+
 def render_task(cfg: Any) -> dict[str, Any]:
     """One rendered episode: build the env of the config, drive and draw it (conf/render.yaml)."""
     from selfplaydrive.builder import build_env
     from selfplaydrive.render.video import render_episode
 
     write_run_meta(cfg)
-    env = build_env(cfg)
+    driver = render_driver(cfg)
+    env = build_env(cfg, **checkpoint_env_kwargs(driver))
     out = render_episode(
         cfg.output,
-        driver=str(cfg.driver),
+        driver=driver,
         steps=int(cfg.steps),
         world=int(cfg.world),
         seed=int(cfg.seed),

@@ -9,7 +9,9 @@ builds one from a name:
 - "rule_based": `RuleBasedDriver` (docs/drivers.md);
 - "random": `RandomDriver` (uniform actions);
 - "static": `StaticDriver` (brake and stand);
-- a path to a PPO checkpoint (`trainers/ppo/checkpoint.py`): `CheckpointPolicy`.
+- a path to a PPO checkpoint (`trainers/ppo/checkpoint.py`): `CheckpointPolicy`;
+- "pretrained": the policy shipped with the library (`selfplaydrive.pretrained`), a checkpoint
+  whose run config lies next to it.
 
 Checkpoints store the model's weights and the PPO settings but not the model's class or
 constructor arguments; `model_from_checkpoint` finds them, in this order: a `model_spec`
@@ -92,10 +94,11 @@ def is_builtin(spec: str | os.PathLike[str]) -> bool:
 
 
 def make_policy(spec: str | os.PathLike[str], env: Any, seed: int = 0, **checkpoint_kwargs: Any) -> Policy:
-    """A policy for `env` from a name ("rule_based", "random", "static") or a checkpoint path.
+    """A policy for `env` from a name ("rule_based", "random", "static", "pretrained") or a
+    checkpoint path.
 
     Args:
-        spec: Built-in name or path of a `.pt` checkpoint.
+        spec: Built-in name, "pretrained" (the shipped checkpoint) or path of a `.pt` checkpoint.
         env: The `VecEnv` the policy drives.
         seed: Seed of the random driver.
         **checkpoint_kwargs: `CheckpointPolicy` arguments (deterministic, device, model_kwargs,
@@ -105,7 +108,9 @@ def make_policy(spec: str | os.PathLike[str], env: Any, seed: int = 0, **checkpo
         CheckpointError: `spec` is neither a built-in name nor a readable checkpoint (a
             `ValueError`, so callers that catch those keep working).
     """
-    name = str(spec)
+    from selfplaydrive.pretrained import resolve_spec
+
+    name = resolve_spec(spec)
     if is_builtin(name):
         from selfplaydrive.drivers import RandomDriver, RuleBasedDriver, StaticDriver
 
@@ -116,8 +121,8 @@ def make_policy(spec: str | os.PathLike[str], env: Any, seed: int = 0, **checkpo
         return DriverPolicy(StaticDriver(env))
     if not Path(name).is_file():
         raise CheckpointError(
-            f"driver {name!r}: expected one of {', '.join(BUILTIN)} or the path of a checkpoint file "
-            "(no such file)",
+            f"driver {name!r}: expected one of {', '.join(BUILTIN)}, pretrained or the path of a checkpoint "
+            "file (no such file)",
             name,
         )
     return CheckpointPolicy(name, env, **checkpoint_kwargs)

@@ -1,5 +1,6 @@
-"""`selfplaydrive eval`: run the chosen analyses for a checkpoint or a built-in driver and
-write JSON plus a markdown table per analysis into the run folder (paper section 5).
+"""`selfplaydrive eval`: run the chosen analyses for a checkpoint, the shipped pretrained policy
+(`policy=pretrained`, `selfplaydrive.pretrained`) or a built-in driver and write JSON plus a
+markdown table per analysis into the run folder (paper section 5).
 
 A checkpoint is driven in the env it was trained in (`EvalTarget`): the observation sizes,
 action table, observation scales, simulator parameters and physics of its run's config
@@ -106,13 +107,16 @@ def resolve_target(cfg: Any) -> EvalTarget:
         trained_env_kwargs,
         trained_obs_dim,
     )
+    from selfplaydrive.pretrained import resolve_spec
 
-    spec, seed = str(cfg.policy), int(cfg.seed)
+    spec, seed = resolve_spec(str(cfg.policy)), int(cfg.seed)
     if is_builtin(spec):
         return EvalTarget(SpecPolicy(spec, seed), env_source="paper defaults (built-in driver)")
     if not Path(spec).is_file():
         raise CheckpointError(
-            "policy: no such file; expected a checkpoint path or one of rule_based, random, static", spec
+            "policy: no such file; expected a checkpoint path, pretrained or one of rule_based, random, "
+            "static",
+            spec,
         )
     payload = load_checkpoint(spec)
     given = cfg.get("run_config")

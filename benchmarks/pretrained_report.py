@@ -1,0 +1,249 @@
+"""The evaluation report of the shipped pretrained policy (issue #16 item 3; docs/training.md,
+"The pretrained policy"): writes `selfplaydrive/pretrained/report.json` and `REPORT.md`.
+
+    python benchmarks/pretrained_report.py                        # map=default and map=tartu
+    python benchmarks/pretrained_report.py --maps default --eval quick --episodes 4   # a smoke run
+
+Per map:
+
+1. *Waypoint completion* under the paper's evaluation protocol (section 5: the fixed evaluation
+   coefficients of conf/reward/eval.yaml, every penalty at its maximum): the trainer's own
+   `evaluate` on `--episodes` fresh world-episodes (seed + `EVAL_SEED_OFFSET`, as the final
+   evaluation of `selfplaydrive train`), with the run's spawner (its agents per world) and with
+   the paper's 32 agents per world, sampled and greedy actions. Completion is reached waypoints
+   over assigned ones; the collision and road-edge rates are the share of agents with at least
+   one such contact.
+2. `selfplaydrive eval policy=pretrained map=<map> eval=<eval>`: the rule-adherence suites (turn
+   lanes: correct lanes out of the scenarios) and long-form self-play (km between incidents,
+   collisions and road-edge contacts counted), read from that run's `suites.json` and
+   `longform.json`.
+
+Tartu needs the shared maps (`SELFPLAYDRIVE_SHARED_MAPS`, default ../shared/maps); a map that
+does not load is reported as skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+TARGETS = {"waypoint_completion": 0.80, "km_between_incidents": 1.0, "turn_lanes_correct": 100 / 128}
+PAPER_AGENTS = 32  # conf/spawner/paper.yaml: agents per world in the paper's spawner (section 2.2)
+
+
+def completion_eval(map_name: str, agents: int | None, episodes: int, deterministic: bool) -> dict[str, Any]:
+    """The trainer's evaluation of the shipped policy under the fixed evaluation coefficients.
+
+    Args:
+        map_name: A `map` option (default, tartu ...).
+        agents: Agents per world (None: the training run's spawner).
+        episodes: World-episodes to finish.
+        deterministic: Greedy actions instead of sampled ones.
+    """
+    import torch
+
+    from selfplaydrive import pretrained
+    from selfplaydrive.builder import build_env, build_model, compose, instantiate
+    from selfplaydrive.policies import load_checkpoint, load_run_config
+    from selfplaydrive.trainers.ppo.trainer import PPOTrainer
+    from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
+
+    cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
+    cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
+    cfg.map = compose("train", [f"map={map_name}"]).map
+    cfg.env.num_threads = 1
+    if agents is not None:
+        cfg.spawner.num_agents = int(agents)
+    seed_everything(int(cfg.seed), 1)
+    env = build_env(cfg)
+    model = build_model(cfg, env)
+    model.load_state_dict(load_checkpoint(pretrained.checkpoint_path())["model"])
+    with tempfile.TemporaryDirectory() as scratch:
+        trainer = PPOTrainer(env, model, instantiate(cfg.trainer), scratch)
+        start = time.perf_counter()
+        with torch.inference_mode():
+            out = trainer.evaluate(episodes, 5000, deterministic, int(cfg.seed) + EVAL_SEED_OFFSET)
+    return {
+        "agents_per_world": int(cfg.spawner.num_agents),
+        "num_worlds": int(cfg.env.num_worlds),
+        "actions": "greedy" if deterministic else "sampled",
+        "wall_s": round(time.perf_counter() - start, 1),
+        **{k: v for k, v in out.items() if not k.startswith("term/")},
+    }
+
+
+def cli_eval(map_name: str, eval_name: str, run_dir: Path, seed: int) -> dict[str, Any]:
+    """`selfplaydrive eval policy=pretrained` on `map_name`; the figures the targets name."""
+    from selfplaydrive.cli import main
+
+    start = time.perf_counter()
+    args = ["eval", "policy=pretrained", f"map={map_name}", f"eval={eval_name}", f"seed={seed}"]
+    code = main([*args, f"hydra.run.dir={run_dir}"])
+    if code != 0:
+        raise RuntimeError(f"selfplaydrive {' '.join(args)}: exit code {code}")
+    suites = json.loads((run_dir / "suites.json").read_text())
+    longform = json.loads((run_dir / "longform.json").read_text())
+    turn = suites["turn_lanes"]["summary"]["all"]["correct_lane"]
+    return {
+        "command": "selfplaydrive " + " ".join(args),
+        "wall_s": round(time.perf_counter() - start, 1),
+        "turn_lanes": {
+            "requested": suites["turn_lanes"]["requested"],
+            **{k: turn[k] for k in ("numerator", "denominator", "value", "lo", "hi")},
+        },
+        "suites": {name: r["summary"] for name, r in suites.items()},
+        "longform": {
+            k: longform[k]
+            for k in ("protocol", "km", "incidents", "onsets", "km_between_incidents", "mean_speed_kmh")
+        },
+    }
+
+
+def map_report(map_name: str, args: argparse.Namespace, work: Path) -> dict[str, Any]:
+    """Both parts for one map, or {"skipped": reason} when the map does not load."""
+    from selfplaydrive.builder import build_maps, compose
+
+    try:
+        build_maps(compose("train", [f"map={map_name}"]).map)
+    except Exception as exc:  # a missing shared map folder raises MapError / OSError
+        return {"skipped": f"{type(exc).__name__}: {exc}"}
+    completion = [
+        completion_eval(map_name, agents, args.episodes, greedy)
+        for agents in (None, PAPER_AGENTS)
+        for greedy in (False, True)
+    ]
+    for row in completion:
+        print(f"{map_name}: {json.dumps(row)}", file=sys.stderr, flush=True)
+    return {
+        "completion": completion,
+        "eval": cli_eval(map_name, args.eval, work / f"eval_{map_name}", args.seed),
+    }
+
+
+def pct(x: float) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def markdown(report: dict[str, Any]) -> str:
+    """REPORT.md: the measured figures against the issue's targets."""
+    meta = report["policy"]
+    lines = [
+        "# The pretrained policy: evaluation report",
+        "",
+        f"Written by `{report['command']}` on {report['date']} ({report['machine']}).",
+        f"Policy: `selfplaydrive/pretrained/main_job.pt`, update {meta.get('update')}, "
+        f"{meta.get('slot_steps')} slot-steps ({meta.get('agent_steps')} agent-steps) of "
+        f"`{meta.get('command', '?')}`.",
+        "",
+        *training_lines(meta),
+    ]
+    for name, rep in report["maps"].items():
+        lines += [f"## map={name}", ""]
+        if "skipped" in rep:
+            lines += [f"Skipped: {rep['skipped']}", ""]
+            continue
+        lines += [
+            "Waypoint completion, fixed evaluation coefficients (trainer's `evaluate`, "
+            f"{report['episodes']} world-episodes, seed + 1,000,003):",
+            "",
+            "| agents per world | actions | completion | collision rate | road-edge rate | km | wall s |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in rep["completion"]:
+            completion = pct(r.get("waypoint_completion", float("nan")))
+            lines.append(
+                f"| {r['agents_per_world']} | {r['actions']} | {completion} "
+                f"| {r.get('collision_rate', float('nan')):.3f} | {r.get('offroad_rate', float('nan')):.3f} "
+                f"| {r.get('km', 0.0):.1f} | {r['wall_s']} |"
+            )
+        ev = rep["eval"]
+        turn, lf = ev["turn_lanes"], ev["longform"]
+        kbi = lf["km_between_incidents"]
+        lines += [
+            "",
+            f"`{ev['command']}` ({ev['wall_s']} s):",
+            "",
+            f"- turn-lane suite: {turn['numerator']}/{turn['denominator']} correct lanes "
+            f"(95 % interval {pct(turn['lo'])} - {pct(turn['hi'])}; {turn['requested']} scenarios asked for, "
+            f"{turn['denominator']} found on the map);",
+            f"- long-form: {lf['km']:.2f} km, {lf['incidents']} incidents (collisions and road-edge "
+            f"contacts), {kbi['value']:.3f} km between incidents (95 % interval {kbi['lo']:.3f} - "
+            f"{kbi['hi']:.3f}), mean speed {lf['mean_speed_kmh']:.1f} km/h.",
+            "",
+        ]
+    lines += ["## Targets (issue #16 item 3)", "", *target_lines(report), ""]
+    return "\n".join(lines)
+
+
+def training_lines(meta: dict[str, Any]) -> list[str]:
+    """How the shipped policy was trained, from `main_job.json`."""
+    keys = ("command", "invocation", "seed", "start_utc", "end_utc", "duration_s", "machine", "git_commit")
+    rows = [f"| {k} | `{meta[k]}` |" for k in keys if k in meta]
+    counts = ("update", "slot_steps", "agent_steps", "size_bytes")
+    rows += [f"| {k} | {meta[k]} |" for k in counts if k in meta]
+    return ["## Training", "", "| | |", "|---|---|", *rows, ""]
+
+
+def target_lines(report: dict[str, Any]) -> list[str]:
+    """One line per map and target: measured, target, met or short by how much."""
+    out = []
+    for name, rep in report["maps"].items():
+        if "skipped" in rep:
+            continue
+        rates = [r.get("waypoint_completion", 0.0) for r in rep["completion"]]
+        best, worst = max(rates), min(rates)
+        turn = rep["eval"]["turn_lanes"]
+        kbi = rep["eval"]["longform"]["km_between_incidents"]["value"]
+        for label, got, want, fmt in (
+            (f"completion (best row; worst {pct(worst)})", best, TARGETS["waypoint_completion"], pct),
+            ("km between incidents", kbi, TARGETS["km_between_incidents"], lambda v: f"{v:.3f} km"),
+            ("turn lanes correct", turn["value"], TARGETS["turn_lanes_correct"], pct),
+        ):
+            verdict = "met" if got >= want else f"not met: {fmt(got)} of {fmt(want)} ({got / want:.2f} x)"
+            out.append(f"- map={name}, {label}: {fmt(got)}, target >= {fmt(want)}: {verdict}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    from selfplaydrive import pretrained
+
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--maps", nargs="+", default=["default", "tartu"])
+    parser.add_argument(
+        "--eval", default="paper", help="the eval config of selfplaydrive eval (paper, quick)"
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=32, help="world-episodes of the completion evaluation"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of selfplaydrive eval")
+    parser.add_argument("--out", default=str(pretrained.FOLDER), help="where report.json and REPORT.md go")
+    parser.add_argument("--work", default=None, help="folder for the eval runs (default: a temporary one)")
+    args = parser.parse_args(argv)
+    work = Path(args.work or tempfile.mkdtemp(prefix="pretrained_report_"))
+    report = {
+        "command": "python benchmarks/pretrained_report.py "
+        + " ".join(argv if argv is not None else sys.argv[1:]),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+        "episodes": args.episodes,
+        "policy": {k: v for k, v in pretrained.load_metadata().items() if k != "layout"},
+        "maps": {name: map_report(name, args, work) for name in args.maps},
+    }
+    out = Path(args.out)
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out / "REPORT.md").write_text(markdown(report))
+    print(markdown(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""The shipped pretrained policy (selfplaydrive/pretrained/, issue #16 item 3): its files are
+package data and small, its recorded observation/action layout is the one the env builds from
+its config today (this fails when the layout changes: train and ship it again, docs/training.md
+"The pretrained policy"), it loads and drives, and `policy=pretrained` / `driver=pretrained`
+reach it from `selfplaydrive eval` and `selfplaydrive render`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from selfplaydrive import pretrained
+from selfplaydrive.errors import CheckpointError
+from selfplaydrive.obs.layout import ObsLayout
+
+torch = pytest.importorskip("torch")
+
+ROOT = Path(__file__).resolve().parents[1]
+MAX_BYTES = 5 * 2**20  # "a few MB at most"
+RETRAIN = (
+    "the shipped pretrained policy no longer matches the env built from its config: train it again and "
+    "ship it (docs/training.md, 'The pretrained policy')"
+)
+
+
+@pytest.fixture(scope="module")
+def env():
+    return pretrained.build_env(num_worlds=2, seed=0)
+
+
+def test_files_are_package_data_and_small():
+    meta = pretrained.load_metadata()
+    for key in ("command", "seed", "start_utc", "end_utc", "duration_s", "machine", "git_commit", "layout"):
+        assert key in meta, key
+    size = pretrained.checkpoint_path().stat().st_size
+    assert size == meta["size_bytes"] and size < MAX_BYTES
+    assert (pretrained.FOLDER / pretrained.RUN_CONFIG).is_file()
+    tomllib = pytest.importorskip("tomllib", reason="tomllib needs Python >= 3.11")
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    assert {"*.pt", "*.json", "*.md"} <= set(data["selfplaydrive.pretrained"])
+    assert "*.yaml" in data["*"]
+
+
+def test_layout_signature_hand_computed():
+    """19 ego + 2 objects x 9 + 3 segments x 8 = 61 columns; a 3 x 2 action table."""
+    table = SimpleNamespace(accel=np.array([-1.0, 0.0, 1.0]), steer=np.array([-0.1, 0.1]))
+    fake = SimpleNamespace(
+        layout=ObsLayout(max_objects=2, max_road=3),
+        action_table=table,
+        action_space=SimpleNamespace(nvec=[3, 2]),
+    )
+    sig = pretrained.layout_signature(fake)
+    assert sig == {
+        "obs_dim": 61,
+        "blocks": {"ego": [19], "objects": [2, 9], "road": [3, 8], "extra": [0]},
+        "action_kind": "SimpleNamespace",
+        "action_nvec": [3, 2],
+        "accel": [-1.0, 0.0, 1.0],
+        "steer_rad": [-0.1, 0.1],
+    }
+
+
+def test_recorded_layout_matches_the_env(env):
+    assert pretrained.layout_signature(env) == pretrained.load_metadata()["layout"], RETRAIN
+
+
+def test_weights_fit_and_a_batched_forward_pass_is_finite(env):
+    from selfplaydrive.policies import load_checkpoint, model_from_checkpoint
+
+    path = pretrained.checkpoint_path()
+    payload = load_checkpoint(path)
+    assert not {"optimizer", "env"} & set(payload)  # policy-only
+    try:
+        model = model_from_checkpoint(payload, env, path).eval()
+    except CheckpointError as exc:
+        pytest.fail(f"{RETRAIN}: {exc}")
+    obs = torch.from_numpy(env.reset(seed=0).copy())
+    n = obs.shape[0]
+    with torch.no_grad():
+        logits, value, _ = model(obs, model.initial_state(n, "cpu"), torch.ones(n, dtype=torch.bool))
+    assert logits.shape == (n, sum(pretrained.load_metadata()["layout"]["action_nvec"]))
+    assert value.shape[0] == n and torch.isfinite(logits).all() and torch.isfinite(value).all()
+
+
+def test_policy_drives_a_few_steps(env):
+    from selfplaydrive.policies import make_policy
+
+    obs = env.reset(seed=1)
+    policy = make_policy("pretrained", env)
+    nvec = np.asarray(env.action_space.nvec)
+    for _ in range(5):
+        actions = policy(obs, env)
+        assert actions.shape == (env.num_agents, 2)
+        assert ((actions >= 0) & (actions < nvec)).all()
+        env.step(actions)
+        obs = env.observations
+    assert np.isfinite(obs).all()
+
+
+def test_resolve_spec_and_a_missing_file(monkeypatch, tmp_path):
+    assert pretrained.resolve_spec("pretrained") == str(pretrained.FOLDER / pretrained.CHECKPOINT)
+    assert pretrained.resolve_spec("rule_based") == "rule_based"
+    assert pretrained.resolve_spec("x/final.pt") == "x/final.pt"
+    monkeypatch.setattr(pretrained, "FOLDER", tmp_path)
+    with pytest.raises(CheckpointError, match="pretrained policy is missing"):
+        pretrained.resolve_spec("pretrained")
+
+
+def test_eval_finds_the_run_config():
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.eval.app import resolve_target
+
+    target = resolve_target(OmegaConf.create({"policy": "pretrained", "seed": 0}))
+    assert target.env_source == str(pretrained.FOLDER / pretrained.RUN_CONFIG)
+    assert target.policy.spec == str(pretrained.checkpoint_path())
+    assert (
+        target.env_kwargs["obs"].max_objects == pretrained.load_metadata()["layout"]["blocks"]["objects"][0]
+    )
+
+
+def test_render_cli_drives_the_pretrained_policy(tmp_path):
+    from selfplaydrive.cli import main
+
+    out = tmp_path / "p.gif"
+    args = ["render", "policy=pretrained", "steps=2", "size=64", f"output={out}", f"hydra.run.dir={tmp_path}"]
+    assert main(args) == 0 and out.is_file()
