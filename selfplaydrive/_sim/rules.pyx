@@ -17,6 +17,7 @@ from libc.math cimport sqrtf, fabsf
 cdef double HALF_PI = 1.5707963267948966
 from libc.stdint cimport int32_t, int64_t, uintptr_t
 from selfplaydrive._sim.common cimport Sim, Params, Atlas, LIGHT_RED
+from selfplaydrive._sim.geometry cimport clip1 as clip  # one Liang-Barsky half-plane
 
 cdef enum:
     H_MAPS = 2        # args[2]: number of maps (args[0]: state offset, args[1]: layout version)
@@ -84,25 +85,6 @@ cdef inline const float* record(const Cell* c, int j) noexcept nogil:
 
 
 # ---- red_intersection ------------------------------------------------------------------------
-cdef inline bint clip(float p, float q, float* t0, float* t1) noexcept nogil:
-    """One Liang-Barsky boundary: keep t with p t <= q."""
-    cdef float r
-    if p == 0.0:
-        return q >= 0.0
-    r = q / p
-    if p < 0.0:
-        if r > t1[0]:
-            return False
-        if r > t0[0]:
-            t0[0] = r
-    else:
-        if r < t0[0]:
-            return False
-        if r < t1[0]:
-            t1[0] = r
-    return True
-
-
 cdef inline bint in_zone(const float* z, float x, float y, float L, float R, float D) noexcept nogil:
     """(x, y) inside zone z = (cx, cy, ux, uy, group): 0 <= along <= D, -R <= left <= L."""
     cdef float dx = x - z[0], dy = y - z[1]
