@@ -297,7 +297,8 @@ def test_render_and_bench_keys_are_arguments():
     from selfplaydrive.sim.bench import run_bench
 
     groups = {"map", "spawner", "physics", "reward", "obs", "env"}
-    render = set(compose("render")) - groups
+    # policy: read by the CLI (hydra_app.render_driver), which passes it on as render_episode's driver
+    render = set(compose("render")) - groups - {"policy"}
     assert render == set(inspect.signature(render_episode).parameters) - {"map_spec", "num_worlds", "env"}
     cfg = compose("bench")
     bench = set(cfg) - groups - {"json"}  # json: print format
