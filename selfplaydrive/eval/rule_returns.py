@@ -29,9 +29,9 @@ import numpy as np
 from selfplaydrive.eval.suites import scripted
 from selfplaydrive.eval.suites.base import SuiteScenario, run_suite
 from selfplaydrive.eval.suites.crosswalks import CrosswalkSuite
-from selfplaydrive.eval.suites.geometry import cumlen, point_at
 from selfplaydrive.eval.suites.red_lights import SWERVE, RedLightSuite
 from selfplaydrive.eval.suites.report import generate_all
+from selfplaydrive.eval.suites.shapes import offset_path
 from selfplaydrive.eval.suites.stop_signs import StopSignSuite
 from selfplaydrive.maps.roadmap import RoadMap, StopKind
 from selfplaydrive.maps.rule_geometry import GATE_DEPTH
@@ -87,12 +87,7 @@ def swerve_path(
     Returns:
         (n, 2) float64 polyline resampled every 0.5 m.
     """
-    s = np.arange(0.0, cumlen(path)[-1] + 1e-9, 0.5)
-    xy, hd = point_at(path, s)
-    up = np.clip((s - out[0]) / max(out[1] - out[0], 1e-6), 0.0, 1.0)
-    down = np.clip((s - back[0]) / max(back[1] - back[0], 1e-6), 0.0, 1.0)
-    shift = offset * (1 - np.cos(np.pi * up)) / 2 * (1 + np.cos(np.pi * down)) / 2
-    return xy + shift[:, None] * np.stack([-np.sin(hd), np.cos(hd)], axis=1)
+    return offset_path(path, offset, out, back=back)
 
 
 def bypass_and_rejoin(item: SuiteScenario) -> list[scripted.Plan]:

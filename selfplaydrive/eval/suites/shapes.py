@@ -52,9 +52,16 @@ def lane_polygons(geo: LaneGeometry, lanes: np.ndarray) -> np.ndarray:
     return shapely.buffer(np.array(lines, dtype=object), widths / 2, cap_style="flat")
 
 
-def offset_path(path: np.ndarray, offset: float, ramp: tuple[float, float], step: float = 0.5) -> np.ndarray:
+def offset_path(
+    path: np.ndarray,
+    offset: float,
+    ramp: tuple[float, float],
+    step: float = 0.5,
+    back: tuple[float, float] | None = None,
+) -> np.ndarray:
     """`path` shifted `offset` [m] to the left, the shift growing smoothly (cosine) from 0 at
-    arc `ramp[0]` to the full offset at `ramp[1]` and kept to the end.
+    arc `ramp[0]` to the full offset at `ramp[1]` and kept to the end, or, with `back`, falling
+    back to 0 between arcs `back[0]` and `back[1]` (a swerve out and back in).
 
     Returns:
         (n, 2) float64 polyline resampled every `step` m.
@@ -63,5 +70,8 @@ def offset_path(path: np.ndarray, offset: float, ramp: tuple[float, float], step
     xy, hd = point_at(path, s)
     f = np.clip((s - ramp[0]) / max(ramp[1] - ramp[0], 1e-6), 0.0, 1.0)
     shift = offset * (1 - np.cos(np.pi * f)) / 2
+    if back is not None:
+        g = np.clip((s - back[0]) / max(back[1] - back[0], 1e-6), 0.0, 1.0)
+        shift = shift * (1 + np.cos(np.pi * g)) / 2
     left = np.stack([-np.sin(hd), np.cos(hd)], axis=1)
     return xy + shift[:, None] * left
