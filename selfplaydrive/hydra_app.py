@@ -191,6 +191,15 @@ def train_task(cfg: Any) -> dict[str, Any]:
         return trainer.run(env, cfg, run_dir, logger=logger)
     seed_everything(int(cfg.seed), trainer.torch_threads)  # before the model: its initial weights
     model = build_model(cfg, env)
+    if cfg.get("init_from") is not None:
+        if cfg.get("resume") is not None:
+            raise ConfigError(
+                "init_from and resume both set; expected one: resume continues a run (its optimiser, "
+                "counters and env), init_from starts a new run from a checkpoint's model weights"
+            )
+        from selfplaydrive.trainers.run import init_weights
+
+        init_weights(model, str(cfg.init_from))
     return train_run(env, model, trainer, run_dir, logger=logger, resume=cfg.get("resume"))
 
 

@@ -93,3 +93,31 @@ def test_resume_of_a_missing_folder_fails_with_one_line_naming_it(tmp_path, caps
     assert code == 1
     assert err.startswith("selfplaydrive train: error:") and "\n" not in err
     assert str(where) in err and "no such file or folder" in err
+
+
+def test_init_from_starts_a_new_run_from_a_checkpoints_weights(tmp_path):
+    """`init_from=` takes only the weights: the new run starts at update 0 in its own folder, and
+    after one update its parameters sit far closer to the source's than a fresh run's do."""
+    source = train(tmp_path / "source", 2)
+    tuned = train(tmp_path / "tuned", 1, f"init_from={source / 'checkpoints' / 'final.pt'}", "seed=5")
+    fresh = train(tmp_path / "fresh", 1, "seed=5")
+    assert len(rows(tuned)) == 1 and not (tuned / "resumes.jsonl").exists()
+    src, a, b = params(source), params(tuned), params(fresh)
+    near = sum(float((a[k] - src[k]).abs().sum()) for k in src)
+    far = sum(float((b[k] - src[k]).abs().sum()) for k in src)
+    assert near < 0.2 * far
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (["init_from=pretrained", "model=deepsets"], "do not fit this run's DeepSetsModel"),
+        (["init_from=pretrained", "resume=somewhere"], "init_from and resume both set"),
+    ],
+)
+def test_init_from_refuses_foreign_weights_and_resume_in_one_line(tmp_path, capsys, extra, expected):
+    code = main(["train", *TINY, f"hydra.run.dir={tmp_path / 'x'}", *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 1
+    assert err.startswith("selfplaydrive train: error:") and "\n" not in err
+    assert expected in err

@@ -128,6 +128,41 @@ def train_run(
     }
 
 
+def init_weights(model: nn.Module, source: str | Path) -> Path:
+    """Load a checkpoint's model weights into `model` to start a new run from them (fine-tuning:
+    `selfplaydrive train init_from=...`). Only the weights are taken; the optimiser, the counters,
+    the learning-rate schedule and the env start fresh, unlike `resume`.
+
+    Args:
+        model: The freshly built model of this run's config.
+        source: A `.pt` written by `selfplaydrive train` (full or policy-only), or "pretrained"
+            for the shipped policy (`selfplaydrive.pretrained`).
+
+    Returns:
+        The checkpoint's path.
+
+    Raises:
+        CheckpointError: No such file, not a checkpoint, or weights of another model or
+            observation/action layout (the message names the file and the mismatch).
+    """
+    from selfplaydrive.policies import load_checkpoint
+    from selfplaydrive.pretrained import resolve_spec
+
+    path = Path(resolve_spec(str(source)))
+    weights = load_checkpoint(path)["model"]
+    try:
+        model.load_state_dict(dict(weights))
+    except RuntimeError as exc:  # missing keys or size mismatches: another model or layout
+        first = str(exc).strip().splitlines()
+        raise CheckpointError(
+            f"its weights do not fit this run's {type(model).__name__} ({' '.join(first[:3])}); expected a "
+            "checkpoint of the same model and observation/action layout (repeat the env and model overrides "
+            "it was trained with)",
+            path,
+        ) from exc
+    return path
+
+
 def seed_everything(seed: int, torch_threads: int = 0) -> None:
     """Seed torch (CPU and CUDA), NumPy's and Python's global generators with `seed`: call it
     before building the model, whose initial weights come from torch's global generator.
