@@ -3,6 +3,8 @@
 
     python benchmarks/pretrained_report.py                        # map=default and map=tartu
     python benchmarks/pretrained_report.py --maps default --eval quick --episodes 4   # a smoke run
+    python benchmarks/pretrained_report.py --checkpoint runs/x/checkpoints/final.pt --out /tmp/x
+        # a candidate before shipping it (same env as the shipped policy)
 
 Per map:
 
@@ -13,6 +15,9 @@ Per map:
    the paper's 32 agents per world, sampled and greedy actions. Completion is reached waypoints
    over assigned ones; the collision and road-edge rates are the share of agents with at least
    one such contact.
+   For the run's spawner and greedy actions, `selfplaydrive.eval.misses` also charges every
+   missed waypoint to how its agent ended (vehicle, pedestrian, road edge, off route, still
+   pending), in rollouts of its own from the same reset seed.
 2. `selfplaydrive eval policy=pretrained map=<map> eval=<eval>`: the rule-adherence suites (turn
    lanes: correct lanes out of the scenarios) and long-form self-play (km between incidents,
    collisions and road-edge contacts counted), read from that run's `suites.json` and
@@ -38,14 +43,24 @@ TARGETS = {"waypoint_completion": 0.80, "km_between_incidents": 1.0, "turn_lanes
 PAPER_AGENTS = 32  # conf/spawner/paper.yaml: agents per world in the paper's spawner (section 2.2)
 
 
-def completion_eval(map_name: str, agents: int | None, episodes: int, deterministic: bool) -> dict[str, Any]:
-    """The trainer's evaluation of the shipped policy under the fixed evaluation coefficients.
+def completion_eval(
+    map_name: str,
+    agents: int | None,
+    episodes: int,
+    deterministic: bool,
+    checkpoint: Path,
+    misses: bool = False,
+) -> dict[str, Any]:
+    """The trainer's evaluation of the policy under the fixed evaluation coefficients.
 
     Args:
         map_name: A `map` option (default, tartu ...).
         agents: Agents per world (None: the training run's spawner).
         episodes: World-episodes to finish.
         deterministic: Greedy actions instead of sampled ones.
+        checkpoint: The policy (the shipped one by default); the env is the shipped run's.
+        misses: Also break the missed waypoints down by outcome (`eval.misses`) on the same
+            world-episodes, in its own rollouts with `policies.make_policy` (same reset seed).
     """
     import torch
 
@@ -64,27 +79,36 @@ def completion_eval(map_name: str, agents: int | None, episodes: int, determinis
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
     model = build_model(cfg, env)
-    model.load_state_dict(load_checkpoint(pretrained.checkpoint_path())["model"])
+    model.load_state_dict(load_checkpoint(checkpoint)["model"])
     with tempfile.TemporaryDirectory() as scratch:
         trainer = PPOTrainer(env, model, instantiate(cfg.trainer), scratch)
         start = time.perf_counter()
         with torch.inference_mode():
             out = trainer.evaluate(episodes, 5000, deterministic, int(cfg.seed) + EVAL_SEED_OFFSET)
+    row: dict[str, Any] = {}
+    if misses:
+        from selfplaydrive.eval.misses import completion_breakdown
+        from selfplaydrive.policies import make_policy
+
+        policy = make_policy(str(checkpoint), env, deterministic=deterministic)
+        seed = int(cfg.seed) + EVAL_SEED_OFFSET
+        row["misses"] = completion_breakdown(env, policy, episodes, seed=seed, max_steps=5000).to_dict()
     return {
         "agents_per_world": int(cfg.spawner.num_agents),
         "num_worlds": int(cfg.env.num_worlds),
         "actions": "greedy" if deterministic else "sampled",
         "wall_s": round(time.perf_counter() - start, 1),
         **{k: v for k, v in out.items() if not k.startswith("term/")},
+        **row,
     }
 
 
-def cli_eval(map_name: str, eval_name: str, run_dir: Path, seed: int) -> dict[str, Any]:
-    """`selfplaydrive eval policy=pretrained` on `map_name`; the figures the targets name."""
+def cli_eval(map_name: str, eval_name: str, run_dir: Path, seed: int, policy: str) -> dict[str, Any]:
+    """`selfplaydrive eval policy=<policy>` on `map_name`; the figures the targets name."""
     from selfplaydrive.cli import main
 
     start = time.perf_counter()
-    args = ["eval", "policy=pretrained", f"map={map_name}", f"eval={eval_name}", f"seed={seed}"]
+    args = ["eval", f"policy={policy}", f"map={map_name}", f"eval={eval_name}", f"seed={seed}"]
     code = main([*args, f"hydra.run.dir={run_dir}"])
     if code != 0:
         raise RuntimeError(f"selfplaydrive {' '.join(args)}: exit code {code}")
@@ -115,7 +139,9 @@ def map_report(map_name: str, args: argparse.Namespace, work: Path) -> dict[str,
     except Exception as exc:  # a missing shared map folder raises MapError / OSError
         return {"skipped": f"{type(exc).__name__}: {exc}"}
     completion = [
-        completion_eval(map_name, agents, args.episodes, greedy)
+        completion_eval(
+            map_name, agents, args.episodes, greedy, args.checkpoint, misses=agents is None and greedy
+        )
         for agents in (None, PAPER_AGENTS)
         for greedy in (False, True)
     ]
@@ -123,7 +149,7 @@ def map_report(map_name: str, args: argparse.Namespace, work: Path) -> dict[str,
         print(f"{map_name}: {json.dumps(row)}", file=sys.stderr, flush=True)
     return {
         "completion": completion,
-        "eval": cli_eval(map_name, args.eval, work / f"eval_{map_name}", args.seed),
+        "eval": cli_eval(map_name, args.eval, work / f"eval_{map_name}", args.seed, args.policy),
     }
 
 
@@ -163,6 +189,7 @@ def markdown(report: dict[str, Any]) -> str:
                 f"| {r.get('collision_rate', float('nan')):.3f} | {r.get('offroad_rate', float('nan')):.3f} "
                 f"| {r.get('km', 0.0):.1f} | {r['wall_s']} |"
             )
+        lines += miss_lines(rep["completion"])
         ev = rep["eval"]
         turn, lf = ev["turn_lanes"], ev["longform"]
         kbi = lf["km_between_incidents"]
@@ -180,6 +207,27 @@ def markdown(report: dict[str, Any]) -> str:
         ]
     lines += ["## Targets (issue #16 item 3)", "", *target_lines(report), ""]
     return "\n".join(lines)
+
+
+def miss_lines(rows: list[dict[str, Any]]) -> list[str]:
+    """The table of `eval.misses` for the row that has one."""
+    for r in rows:
+        if "misses" not in r:
+            continue
+        m = r["misses"]
+        lines = [
+            "",
+            f"Where the missed waypoints go ({r['agents_per_world']} agents per world, {r['actions']}; "
+            f"`selfplaydrive.eval.misses`, {m['episodes']} world-episodes, {m['agents']} agents, "
+            f"completion {pct(m['waypoint_completion'])}):",
+            "",
+            "| outcome | agents | missed, share of all waypoints |",
+            "|---|---|---|",
+        ]
+        for name, o in m["outcomes"].items():
+            lines.append(f"| {name} | {o['agents']} ({pct(o['agent_share'])}) | {pct(o['missed_share'])} |")
+        return lines
+    return []
 
 
 def training_lines(meta: dict[str, Any]) -> list[str]:
@@ -225,9 +273,18 @@ def main(argv: list[str] | None = None) -> int:
         "--episodes", type=int, default=32, help="world-episodes of the completion evaluation"
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of selfplaydrive eval")
+    parser.add_argument(
+        "--checkpoint",
+        default=None,
+        help="evaluate this checkpoint in the shipped policy's env instead of the shipped policy",
+    )
     parser.add_argument("--out", default=str(pretrained.FOLDER), help="where report.json and REPORT.md go")
     parser.add_argument("--work", default=None, help="folder for the eval runs (default: a temporary one)")
     args = parser.parse_args(argv)
+    args.policy = "pretrained" if args.checkpoint is None else str(Path(args.checkpoint).resolve())
+    args.checkpoint = (
+        pretrained.checkpoint_path() if args.checkpoint is None else Path(args.checkpoint).resolve()
+    )
     work = Path(args.work or tempfile.mkdtemp(prefix="pretrained_report_"))
     report = {
         "command": "python benchmarks/pretrained_report.py "
@@ -235,7 +292,9 @@ def main(argv: list[str] | None = None) -> int:
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
         "episodes": args.episodes,
-        "policy": {k: v for k, v in pretrained.load_metadata().items() if k != "layout"},
+        "policy": {k: v for k, v in pretrained.load_metadata().items() if k != "layout"}
+        if args.policy == "pretrained"
+        else {"checkpoint": args.policy},
         "maps": {name: map_report(name, args, work) for name in args.maps},
     }
     out = Path(args.out)

@@ -42,6 +42,7 @@ from selfplaydrive.rewards.components import KernelTerm, LinearReward
 from selfplaydrive.rewards.registry import EVENT_NAMES, RewardHook
 from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.sim.actions import BoxActions, DiscreteActions
+from selfplaydrive.sim.agent_outcomes import agent_outcomes
 from selfplaydrive.sim.atlas import build_atlas
 from selfplaydrive.sim.buffers import Dims, allocate, buffer_bytes, check_scenario, pack
 from selfplaydrive.sim.params import SimParams
@@ -209,6 +210,9 @@ class VecEnv:
         )
         self._expose()
         self.episode_stats: list[dict[str, object]] = []
+        # per-agent end states in each episode record ("agents", sim/agent_outcomes.py); not
+        # carried by get_state
+        self.record_agents = False
         self.dropped_episode_stats = 0  # records discarded past MAX_EPISODE_STATS
         self._pending_first = first
 
@@ -458,6 +462,8 @@ class VecEnv:
                 "events": {n: int(v) for n, v in zip(EVENT_NAMES, b["ev_count"][w], strict=True)},
                 "agents_with": {n: int(np.count_nonzero(ever & bit)) for n, bit in EVER_BITS.items()},
             }
+            if self.record_agents:
+                rec["agents"] = agent_outcomes(b, int(w), A)
             self.episode_stats.append(rec)
         self._cap_episode_stats()
 
