@@ -208,6 +208,9 @@ def _registry() -> dict[str, Term]:
         from selfplaydrive.rewards.rules import RULE_TERMS  # issue #15: the rule terms, off by default
 
         _REGISTRY.update({t.name: t for t in RULE_TERMS})
+        from selfplaydrive.rewards.shaping import shaping_terms  # issue #16: shaping, off by default
+
+        _REGISTRY.update({t.name: t for t in shaping_terms()})
     return _REGISTRY
 
 
