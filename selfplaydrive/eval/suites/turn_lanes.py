@@ -59,6 +59,10 @@ class TurnLaneSuite:
         change_room: Lane length [m] left ahead of the start when the change is due on it.
         search_back: How far back [m] correct lanes are searched.
         episode_length: [s].
+        entry_waypoint: None (the paper's suite): the ego's only waypoints lie after the
+            junction. A distance [m]: a first waypoint on the correct lane this far before the
+            junction's start as well, which tells the ego which lane to take (a diagnostic
+            variant: does a policy fail for want of that information, or of the lane change?).
     """
 
     name = "turn_lanes"
@@ -71,6 +75,7 @@ class TurnLaneSuite:
         change_room: float = 12.0,
         search_back: float = 250.0,
         episode_length: float = 25.0,
+        entry_waypoint: float | None = None,
     ) -> None:
         if not 0.0 < start_distance[0] <= start_distance[1]:
             raise ValueError(f"start_distance: expected 0 < low <= high [m], got {start_distance}")
@@ -82,6 +87,9 @@ class TurnLaneSuite:
         self.change_room = float(change_room)
         self.search_back = float(search_back)
         self.episode_length = float(episode_length)
+        if entry_waypoint is not None and not entry_waypoint >= 0.0:
+            raise ValueError(f"entry_waypoint: expected None or a distance >= 0 [m], got {entry_waypoint!r}")
+        self.entry_waypoint = None if entry_waypoint is None else float(entry_waypoint)
 
     # -- generation -------------------------------------------------------------------------
     def sites(self, road_map: RoadMap) -> list[tuple[int, int, int]]:
@@ -146,6 +154,11 @@ class TurnLaneSuite:
         length, width, _ = sizes.sample(rng, 1)
         v = min(rng.uniform(*self.speed), 0.8 * float(L.speed_limit[w]))
         wp, _ = point_at(exit_path, np.array([10.0, min(30.0, cumlen(exit_path)[-1])]))
+        if self.entry_waypoint is not None:
+            if d_entry[k] <= self.entry_waypoint:
+                return None  # the start would already be past the entry waypoint
+            lead, _ = point_at(corridor, np.array([s_entry - self.entry_waypoint]))
+            wp = np.concatenate([lead, wp])
         sc = blank_scenario(geo.road_map, map_index, xy[k], self.episode_length)
         put_agent(sc, 0, xy[k], float(hd[k]), v, (float(length[0]), float(width[0])), w, wp)
         wrong = geo.path(geo.chain_forward(w, 250.0, allow=nonj))
