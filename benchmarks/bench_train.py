@@ -78,8 +78,9 @@ def export_build(rev: str, dest: Path) -> None:
 # worker: builds one trainer and answers "update" lines with one JSON line each
 
 
-def build_trainer(overrides: list[str]):
-    """The trainer `selfplaydrive train <overrides>` would build (seeded, no run folder)."""
+def build_trainer(overrides: list[str], seed_everything):
+    """The trainer `selfplaydrive train <overrides>` would build (seeded, no run folder);
+    `seed_everything` is `selfplaydrive.trainers.run.seed_everything`."""
     from dataclasses import fields
 
     from omegaconf import OmegaConf
@@ -87,7 +88,6 @@ def build_trainer(overrides: list[str]):
     from selfplaydrive.builder import build_env, build_model, compose
     from selfplaydrive.trainers.ppo.config import PPOConfig
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
-    from selfplaydrive.trainers.run import seed_everything
 
     cfg = compose("train", overrides)
     values = OmegaConf.to_container(cfg.trainer, resolve=True)
@@ -141,11 +141,18 @@ def one_update(trainer, env_time: list[float]) -> dict[str, float]:
 
 def worker(overrides: list[str], overlay: str | None) -> None:
     """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin."""
+    # This tree's run.py imports names an older trainer package may lack, so it is imported
+    # before the overlay goes in; the overlaid packages it pulled in are then forgotten, so the
+    # trainer and model below come from the baseline.
+    from selfplaydrive.trainers.run import seed_everything
+
     if overlay:
+        for name in [m for m in sys.modules if any(m == p or m.startswith(p + ".") for p in OVERLAID)]:
+            del sys.modules[name]
         sys.meta_path.insert(0, _Overlay(Path(overlay)))
     import torch
 
-    trainer, cfg = build_trainer(overrides)
+    trainer, cfg = build_trainer(overrides, seed_everything)
     env_time = timed_env_step(trainer.env)
     trainer.train(num_updates=1)  # warm-up: allocations, first reset
     info = {
