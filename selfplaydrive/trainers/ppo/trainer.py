@@ -48,6 +48,22 @@ def resolve_device(name: str, info: DistInfo) -> torch.device:
     return torch.device(name)
 
 
+def compile_model(model: nn.Module) -> bool:
+    """`PPOConfig.compile`: compile the set pooling of `model` (its `compile_pooling`); warns
+    and returns False for a model without one."""
+    hook = getattr(model, "compile_pooling", None)
+    if hook is None:
+        warnings.warn(
+            f"trainer.compile: {type(model).__name__} has no compiled path (compile_pooling); "
+            "training runs eagerly",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return False
+    hook()
+    return True
+
+
 def warn_spinning_threads(device: torch.device) -> None:
     """Warn when several torch CPU threads will spin-wait beside the simulator's.
 
@@ -114,6 +130,7 @@ class PPOTrainer:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
         self.evaluator = wrap(self.model, self.dist, self.device)
+        self.compiled = config.compile and compile_model(self.model)
         # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
         # under DDP: a rank whose minibatch has no active entry would leave the encoders without
         # gradients, and DDP expects every parameter's gradient on every rank.
