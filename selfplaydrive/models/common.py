@@ -454,20 +454,39 @@ def log_prob(logits: Tensor, actions: Tensor, nvec: Sequence[int]) -> Tensor:
     Returns:
         (...) log-probabilities.
     """
-    if actions.shape[-1] != len(nvec):
-        raise ValueError(f"actions: expected last dimension len(nvec) = {len(nvec)}, got {actions.shape[-1]}")
-    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
-    for i, part in enumerate(split_logits(logits, nvec)):
-        logp = torch.log_softmax(part, dim=-1)
-        total = total + logp.gather(-1, actions[..., i : i + 1].long()).squeeze(-1)
-    return total
+    return _sum_log_prob(_log_softmaxes(logits, nvec), actions)
 
 
 def entropy(logits: Tensor, nvec: Sequence[int]) -> Tensor:
     """Entropy of the MultiDiscrete distribution: the sum of per-dimension entropies, (...)."""
-    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
-    for part in split_logits(logits, nvec):
-        logp = torch.log_softmax(part, dim=-1)
+    return _sum_entropy(_log_softmaxes(logits, nvec))
+
+
+def log_prob_and_entropy(logits: Tensor, actions: Tensor, nvec: Sequence[int]) -> tuple[Tensor, Tensor]:
+    """`log_prob(logits, actions, nvec)` and `entropy(logits, nvec)` from one log-softmax per
+    action dimension (the PPO loss needs both; the same values)."""
+    logps = _log_softmaxes(logits, nvec)
+    return _sum_log_prob(logps, actions), _sum_entropy(logps)
+
+
+def _log_softmaxes(logits: Tensor, nvec: Sequence[int]) -> list[Tensor]:
+    return [torch.log_softmax(part, dim=-1) for part in split_logits(logits, nvec)]
+
+
+def _sum_log_prob(logps: list[Tensor], actions: Tensor) -> Tensor:
+    if actions.shape[-1] != len(logps):
+        raise ValueError(
+            f"actions: expected last dimension len(nvec) = {len(logps)}, got {actions.shape[-1]}"
+        )
+    total = torch.zeros(logps[0].shape[:-1], dtype=logps[0].dtype, device=logps[0].device)
+    for i, logp in enumerate(logps):
+        total = total + logp.gather(-1, actions[..., i : i + 1].long()).squeeze(-1)
+    return total
+
+
+def _sum_entropy(logps: list[Tensor]) -> Tensor:
+    total = torch.zeros(logps[0].shape[:-1], dtype=logps[0].dtype, device=logps[0].device)
+    for logp in logps:
         total = total - (logp.exp() * logp).sum(dim=-1)
     return total
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
-from selfplaydrive.models.common import entropy, log_prob, sample_actions
+from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.advantage import compute_gae
@@ -306,11 +306,11 @@ class PPOTrainer:
             active = mb["active"] if self.skip_inactive else None
             logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"], active)
         logits, values, mask = logits.float(), values.float(), mb["active"]
-        new_logprob = log_prob(logits, mb["actions"], self.nvec)
+        new_logprob, entropies = log_prob_and_entropy(logits, mb["actions"], self.nvec)
         adv = normalize_advantages(mb["advantages"], mask) if cfg.norm_adv else mb["advantages"]
         pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef)
         vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef)
-        ent = masked_mean(entropy(logits, self.nvec), mask)
+        ent = masked_mean(entropies, mask)
         loss = pg - cfg.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
 
