@@ -99,9 +99,9 @@ class PPOConfig:
 
     compile: bool = False
     """`torch.compile` the model's set pooling (models with `compile_pooling`: the Deep Sets).
-    Needs a C++ compiler; the first updates compile (about 50 s with an empty inductor cache,
-    5 s with a warm one) and the later ones run about 10 % faster on the CPU (docs/training.md,
-    "Speed")."""
+    Needs a C++ compiler; the first updates compile (43 s with an empty inductor cache, 5 s
+    with a warm one), and the main job's updates then ran only 1.02x faster on a 2-core CPU
+    (docs/training.md, "Speed")."""
 
     deterministic: bool = False
     """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""
