@@ -287,9 +287,9 @@ class PoolKernels:
         """The kernels under `torch.compile`: Linear -> LayerNorm -> GELU -> Linear -> max of a
         chunk becomes two matrix products and one fused loop, with a vectorised max over the
         set (docs/benchmarks.md, "Trainer": a laptop road chunk 1.35-2.5x faster, whole updates
-        1.02x). Each function
-        compiles on its first call per encoder (seconds; automatic dynamic shapes after the
-        first change of a size), and the values equal the eager ones up to float rounding."""
+        1.02x). Each function compiles on its first call per encoder (seconds; automatic
+        dynamic shapes after the first change of a size), and the values equal the eager ones
+        up to float rounding."""
         return cls(
             winners=torch.compile(_chunk_winners),
             maximum=torch.compile(_chunk_max),

@@ -54,9 +54,9 @@ def _encoder(in_dim: int, width: int) -> nn.Sequential:
 
 def _lstm_step(lstm: nn.LSTM, x: Tensor, h: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
     """One step of the one-layer `lstm` for (B, in) inputs: the fused cell on the same weights.
-    `nn.LSTM` goes through oneDNN, whose per-call setup outweighs a single step for the ~100
-    agents of an acting step (docs/benchmarks.md, "Trainer"); the values agree up to float
-    rounding."""
+    `nn.LSTM` goes through oneDNN, which sets up a primitive for every new batch size, and the
+    number of acting agents changes every step (docs/benchmarks.md, "Trainer"); the values
+    agree up to float rounding."""
     return torch.lstm_cell(x, (h, c), lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
 
 
