@@ -78,8 +78,9 @@ def export_build(rev: str, dest: Path) -> None:
 # worker: builds one trainer and answers "update" lines with one JSON line each
 
 
-def build_trainer(overrides: list[str]):
-    """The trainer `selfplaydrive train <overrides>` would build (seeded, no run folder)."""
+def build_trainer(overrides: list[str], seed_everything):
+    """The trainer `selfplaydrive train <overrides>` would build (seeded, no run folder);
+    `seed_everything` is `selfplaydrive.trainers.run.seed_everything`."""
     from dataclasses import fields
 
     from omegaconf import OmegaConf
@@ -87,7 +88,6 @@ def build_trainer(overrides: list[str]):
     from selfplaydrive.builder import build_env, build_model, compose
     from selfplaydrive.trainers.ppo.config import PPOConfig
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
-    from selfplaydrive.trainers.run import seed_everything
 
     cfg = compose("train", overrides)
     values = OmegaConf.to_container(cfg.trainer, resolve=True)
@@ -139,16 +139,33 @@ def one_update(trainer, env_time: list[float]) -> dict[str, float]:
     }
 
 
+def install_overlay(overlay: str | None):
+    """Make the `OVERLAID` packages come from `overlay` (None: this tree's); returns this
+    tree's `seed_everything`.
+
+    This tree's `trainers/run.py` imports names an older trainer package may lack, so it is
+    imported before the overlay goes in, and the overlaid packages it pulled in are then
+    forgotten: the trainer and model imported afterwards come from `overlay`."""
+    from selfplaydrive.trainers.run import seed_everything
+
+    if overlay:
+        for name in [m for m in sys.modules if any(m == p or m.startswith(p + ".") for p in OVERLAID)]:
+            del sys.modules[name]
+        sys.meta_path.insert(0, _Overlay(Path(overlay)))
+    return seed_everything
+
+
 def worker(overrides: list[str], overlay: str | None) -> None:
     """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin."""
-    if overlay:
-        sys.meta_path.insert(0, _Overlay(Path(overlay)))
+    seed_everything = install_overlay(overlay)
     import torch
 
-    trainer, cfg = build_trainer(overrides)
+    trainer, cfg = build_trainer(overrides, seed_everything)
     env_time = timed_env_step(trainer.env)
-    trainer.train(num_updates=1)  # warm-up: allocations, first reset
+    t0 = time.perf_counter()
+    trainer.train(num_updates=1)  # warm-up: allocations, first reset, compiling (trainer.compile)
     info = {
+        "warmup_s": time.perf_counter() - t0,
         "model": type(trainer.model).__name__,
         "parameters": sum(p.numel() for p in trainer.model.parameters()),
         "obs_dim": trainer.env.layout.obs_dim,
@@ -304,7 +321,8 @@ def report(result: dict[str, object]) -> str:
             f"{r['agent_slots']} slots, torch threads {r['torch_threads']}, env threads {r['env_threads']}: "
             f"{r['agent_steps_per_s']:,.0f} agent-steps/s overall, "
             f"{r['agent_steps_per_cpu_s']:,.0f} per CPU-s, "
-            f"{r['collect_agent_steps_per_s']:,.0f} collecting; time: {shares}"
+            f"{r['collect_agent_steps_per_s']:,.0f} collecting; time: {shares}; "
+            f"warm-up update {r['warmup_s']:.1f} s"
         )
     if "ratio_of_medians" in result:
         lines.append(

@@ -14,8 +14,8 @@ value (B,) and a recurrent state: a tuple of tensors (empty for feed-forward mod
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import fields
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields
 from itertools import pairwise
 from typing import Protocol, runtime_checkable
 
@@ -246,7 +246,63 @@ def masked_max(x: Tensor, valid: Tensor) -> Tensor:
 POOL_CHUNK_ELEMENTS = 1 << 14
 
 
-def encode_max(encoder: nn.Module, x: Tensor, valid: Tensor, width: int) -> Tensor:
+def _chunk_winners(encoder: nn.Module, x: Tensor, valid: Tensor | None) -> Tensor:
+    """(R, D) index of the first maximal element of `encoder(x)` per row and dimension,
+    padding (`valid` False; None: all valid) excluded. `x`: (R, N, F)."""
+    emb = encoder(x)
+    if valid is not None:
+        emb = emb.masked_fill(~valid.unsqueeze(-1), float("-inf"))
+    return emb.max(dim=1).indices  # the first maximum, 3x faster than argmax on the CPU
+
+
+def _chunk_max(encoder: nn.Module, x: Tensor, valid: Tensor | None) -> Tensor:
+    """(R, D) maximum of `encoder(x)` over the valid elements (-inf for a row without any)."""
+    emb = encoder(x)
+    if valid is not None:
+        emb = emb.masked_fill(~valid.unsqueeze(-1), float("-inf"))
+    return emb.amax(dim=1)
+
+
+def _encoded_max(encoder: nn.Module, x: Tensor, valid: Tensor) -> Tensor:
+    """`masked_max(encoder(x), valid)`: every element encoded with autograd."""
+    return masked_max(encoder(x), valid)
+
+
+@dataclass(frozen=True)
+class PoolKernels:
+    """The computations `encode_max` is made of, eager or compiled (`compiled`).
+
+    Attributes:
+        winners: (encoder, x, valid | None) -> (R, D) first indices of the maximum.
+        maximum: (encoder, x, valid | None) -> (R, D) maximum values.
+        full: (encoder, x, valid) -> (R, D) `masked_max(encoder(x), valid)` with autograd.
+    """
+
+    winners: Callable[[nn.Module, Tensor, Tensor | None], Tensor] = _chunk_winners
+    maximum: Callable[[nn.Module, Tensor, Tensor | None], Tensor] = _chunk_max
+    full: Callable[[nn.Module, Tensor, Tensor], Tensor] = _encoded_max
+
+    @classmethod
+    def compiled(cls) -> PoolKernels:
+        """The kernels under `torch.compile`: Linear -> LayerNorm -> GELU -> Linear -> max of a
+        chunk becomes two matrix products and one fused loop, with a vectorised max over the
+        set (docs/benchmarks.md, "Trainer": a laptop road chunk 1.35-2.5x faster, whole updates
+        1.02x). Each function compiles on its first call per encoder (seconds; automatic
+        dynamic shapes after the first change of a size), and the values equal the eager ones
+        up to float rounding."""
+        return cls(
+            winners=torch.compile(_chunk_winners),
+            maximum=torch.compile(_chunk_max),
+            full=torch.compile(_encoded_max),
+        )
+
+
+EAGER_POOLING = PoolKernels()
+
+
+def encode_max(
+    encoder: nn.Module, x: Tensor, valid: Tensor, width: int, kernels: PoolKernels = EAGER_POOLING
+) -> Tensor:
     """`masked_max(encoder(x), valid)`, computed without encoding every element with autograd.
 
     Only the elements that win the maximum in some embedding dimension receive gradient, so
@@ -262,6 +318,8 @@ def encode_max(encoder: nn.Module, x: Tensor, valid: Tensor, width: int) -> Tens
         x: (B, N, F) element features.
         valid: (B, N) bool, False for padding.
         width: The encoder's output width D.
+        kernels: The pooling computations (`PoolKernels`; `PoolKernels.compiled()` for the
+            torch.compiled ones).
 
     Returns:
         (B, D) maximum over valid elements; zeros for a row without any valid element.
@@ -271,17 +329,15 @@ def encode_max(encoder: nn.Module, x: Tensor, valid: Tensor, width: int) -> Tens
         x.requires_grad or any(p.requires_grad for p in encoder.parameters())
     )
     if b == 0 or n == 0 or (need_grad and not few_winners(n, width)):
-        return masked_max(encoder(x), valid)
-    all_valid = bool(valid.all())  # the usual case for road segments: skip the masking pass
+        return kernels.full(encoder, x, valid)
+    mask = None if bool(valid.all()) else valid  # all valid: the usual case for road segments
     rows = max(1, POOL_CHUNK_ELEMENTS // n)
-    parts = []
+    chunk = kernels.winners if need_grad else kernels.maximum
     with torch.no_grad():
-        for lo in range(0, b, rows):
-            emb = encoder(x[lo : lo + rows])
-            if not all_valid:
-                emb.masked_fill_(~valid[lo : lo + rows].unsqueeze(-1), float("-inf"))
-            # max(dim).indices is the first maximum, 3x faster than argmax on the CPU
-            parts.append(emb.max(dim=1).indices if need_grad else emb.amax(dim=1))
+        parts = [
+            chunk(encoder, x[lo : lo + rows], None if mask is None else mask[lo : lo + rows])
+            for lo in range(0, b, rows)
+        ]
     pooled = _encode_winners(encoder, x, torch.cat(parts)) if need_grad else torch.cat(parts)
     return torch.where(valid.any(dim=1, keepdim=True), pooled, 0.0)
 
@@ -399,20 +455,39 @@ def log_prob(logits: Tensor, actions: Tensor, nvec: Sequence[int]) -> Tensor:
     Returns:
         (...) log-probabilities.
     """
-    if actions.shape[-1] != len(nvec):
-        raise ValueError(f"actions: expected last dimension len(nvec) = {len(nvec)}, got {actions.shape[-1]}")
-    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
-    for i, part in enumerate(split_logits(logits, nvec)):
-        logp = torch.log_softmax(part, dim=-1)
-        total = total + logp.gather(-1, actions[..., i : i + 1].long()).squeeze(-1)
-    return total
+    return _sum_log_prob(_log_softmaxes(logits, nvec), actions)
 
 
 def entropy(logits: Tensor, nvec: Sequence[int]) -> Tensor:
     """Entropy of the MultiDiscrete distribution: the sum of per-dimension entropies, (...)."""
-    total = torch.zeros(logits.shape[:-1], dtype=logits.dtype, device=logits.device)
-    for part in split_logits(logits, nvec):
-        logp = torch.log_softmax(part, dim=-1)
+    return _sum_entropy(_log_softmaxes(logits, nvec))
+
+
+def log_prob_and_entropy(logits: Tensor, actions: Tensor, nvec: Sequence[int]) -> tuple[Tensor, Tensor]:
+    """`log_prob(logits, actions, nvec)` and `entropy(logits, nvec)` from one log-softmax per
+    action dimension (the PPO loss needs both; the same values)."""
+    logps = _log_softmaxes(logits, nvec)
+    return _sum_log_prob(logps, actions), _sum_entropy(logps)
+
+
+def _log_softmaxes(logits: Tensor, nvec: Sequence[int]) -> list[Tensor]:
+    return [torch.log_softmax(part, dim=-1) for part in split_logits(logits, nvec)]
+
+
+def _sum_log_prob(logps: list[Tensor], actions: Tensor) -> Tensor:
+    if actions.shape[-1] != len(logps):
+        raise ValueError(
+            f"actions: expected last dimension len(nvec) = {len(logps)}, got {actions.shape[-1]}"
+        )
+    total = torch.zeros(logps[0].shape[:-1], dtype=logps[0].dtype, device=logps[0].device)
+    for i, logp in enumerate(logps):
+        total = total + logp.gather(-1, actions[..., i : i + 1].long()).squeeze(-1)
+    return total
+
+
+def _sum_entropy(logps: list[Tensor]) -> Tensor:
+    total = torch.zeros(logps[0].shape[:-1], dtype=logps[0].dtype, device=logps[0].device)
+    for logp in logps:
         total = total - (logp.exp() * logp).sum(dim=-1)
     return total
 

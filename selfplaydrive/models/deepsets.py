@@ -15,7 +15,9 @@ from itertools import pairwise
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.models.common import (
+    EAGER_POOLING,
     ObsSplitter,
+    PoolKernels,
     State,
     check_nvec,
     check_positive,
@@ -31,10 +33,31 @@ with requires_extra("torch"):
     from torch import Tensor, nn
 
 
+class _InputLinear(nn.Linear):
+    """`nn.Linear` (same parameters and values) whose weight gradient is computed as
+    (x^T g)^T rather than g^T x: with a handful of input features torch's CPU product for the
+    latter is slow (the laptop object encoder, 8,736 rows x 9 features: 0.99 -> 0.35 ms for
+    forward + backward; docs/benchmarks.md, "Trainer")."""
+
+    def forward(self, x: Tensor) -> Tensor:
+        # a contiguous (in, out) copy of the weight makes autograd's product for its gradient
+        # x^T g, and the transpose hands it back as (out, in)
+        flat = torch.addmm(self.bias, x.reshape(-1, self.in_features), self.weight.t().contiguous())
+        return flat.reshape(*x.shape[:-1], self.out_features)
+
+
 def _encoder(in_dim: int, width: int) -> nn.Sequential:
     # PufferDrive's encoder is Linear -> LayerNorm -> Linear; the GELU after the norm makes it an
     # MLP proper (no parameters, so the count is unchanged).
-    return nn.Sequential(nn.Linear(in_dim, width), nn.LayerNorm(width), nn.GELU(), nn.Linear(width, width))
+    return nn.Sequential(_InputLinear(in_dim, width), nn.LayerNorm(width), nn.GELU(), nn.Linear(width, width))
+
+
+def _lstm_step(lstm: nn.LSTM, x: Tensor, h: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+    """One step of the one-layer `lstm` for (B, in) inputs: the fused cell on the same weights.
+    `nn.LSTM` goes through oneDNN, which sets up a primitive for every new batch size, and the
+    number of acting agents changes every step (docs/benchmarks.md, "Trainer"); the values
+    agree up to float rounding."""
+    return torch.lstm_cell(x, (h, c), lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
 
 
 def _orthogonal(module: nn.Module, gain: float) -> None:
@@ -89,6 +112,13 @@ class DeepSetsModel(nn.Module):
         self._init_weights()
         with torch.no_grad():
             self.actor.bias.copy_(middle_prior_bias(self.nvec, action_prior))
+        self.pool_kernels = EAGER_POOLING
+
+    def compile_pooling(self) -> None:
+        """Run the object and road encoders with their max pooling under `torch.compile`
+        (`PoolKernels.compiled`; `PPOConfig.compile`). Same parameters and values up to float
+        rounding; the first calls compile (seconds each)."""
+        self.pool_kernels = PoolKernels.compiled()
 
     def _init_weights(self) -> None:
         # PufferLib-style init: orthogonal sqrt(2) trunk, small actor (near-uniform initial policy),
@@ -129,7 +159,7 @@ class DeepSetsModel(nn.Module):
         (e.g. an encoder without road rows, obs/encoders.py)."""
         if x.shape[1] == 0:
             return ego.new_zeros(ego.shape[0], self.input_size)
-        return encode_max(encoder, x, valid, self.input_size)
+        return encode_max(encoder, x, valid, self.input_size, self.pool_kernels)
 
     def forward(self, obs: Tensor, state: State, episode_start: Tensor) -> tuple[Tensor, Tensor, State]:
         """One step for a batch of agents.
@@ -144,10 +174,8 @@ class DeepSetsModel(nn.Module):
         """
         self._check_state(state, obs.shape[0])
         h, c = reset_state(state, episode_start)
-        x = self.encode(obs).unsqueeze(0)
-        out, (h, c) = self.lstm(x, (h.unsqueeze(0), c.unsqueeze(0)))
-        out = out.squeeze(0)
-        return self.actor(out), self.critic(out).squeeze(-1), (h.squeeze(0), c.squeeze(0))
+        h, c = _lstm_step(self.lstm, self.encode(obs), h, c)
+        return self.actor(h), self.critic(h).squeeze(-1), (h, c)
 
     def forward_sequence(
         self, obs: Tensor, state: State, episode_start: Tensor, active: Tensor | None = None

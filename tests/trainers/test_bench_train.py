@@ -89,3 +89,24 @@ def test_summary_takes_medians_and_phase_shares(bench):
     assert out["collect_agent_steps_per_s"] == 600  # 200, 600, 1000
     assert out["share_env_step"] == pytest.approx(0.1)  # 0.1, 0.2, 0.1
     assert out["share_update"] == pytest.approx(0.5)  # 0.5, 0.4, 0.5
+
+
+def test_overlay_of_a_build_older_than_this_trees_run_module(bench, tmp_path):
+    """A baseline whose trainer package lacks a name this tree's trainers/run.py imports (as
+    743fc18~1 lacks `dist.check_resume_agrees`) still gets its own trainer and model."""
+    if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True).returncode:
+        pytest.skip("not a git checkout")
+    bench.export_build("HEAD", tmp_path)
+    dist = tmp_path / "selfplaydrive" / "trainers" / "ppo" / "dist.py"
+    dist.write_text(dist.read_text().replace("def check_resume_agrees(", "def _renamed_in_this_build("))
+    code = (
+        f"import sys; sys.path.insert(0, {str(REPO / 'benchmarks')!r}); import bench_train; "
+        f"seed = bench_train.install_overlay({str(tmp_path)!r}); seed(0); "
+        "import selfplaydrive.trainers.ppo.trainer as t, selfplaydrive.models.deepsets as d; "
+        "print(t.__file__, d.__file__)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == [
+        str(tmp_path / "selfplaydrive" / "trainers" / "ppo" / "trainer.py"),
+        str(tmp_path / "selfplaydrive" / "models" / "deepsets.py"),
+    ]

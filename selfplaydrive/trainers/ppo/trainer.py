@@ -21,7 +21,7 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
-from selfplaydrive.models.common import entropy, log_prob, sample_actions
+from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.advantage import compute_gae
@@ -46,6 +46,22 @@ def resolve_device(name: str, info: DistInfo) -> torch.device:
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise RuntimeError(f"PPOConfig.device = {name!r}, but torch sees no CUDA device")
     return torch.device(name)
+
+
+def compile_model(model: nn.Module) -> bool:
+    """`PPOConfig.compile`: compile the set pooling of `model` (its `compile_pooling`); warns
+    and returns False for a model without one."""
+    hook = getattr(model, "compile_pooling", None)
+    if hook is None:
+        warnings.warn(
+            f"trainer.compile: {type(model).__name__} has no compiled path (compile_pooling); "
+            "training runs eagerly",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return False
+    hook()
+    return True
 
 
 def warn_spinning_threads(device: torch.device) -> None:
@@ -114,6 +130,7 @@ class PPOTrainer:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
         self.evaluator = wrap(self.model, self.dist, self.device)
+        self.compiled = config.compile and compile_model(self.model)
         # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
         # under DDP: a rank whose minibatch has no active entry would leave the encoders without
         # gradients, and DDP expects every parameter's gradient on every rank.
@@ -289,11 +306,11 @@ class PPOTrainer:
             active = mb["active"] if self.skip_inactive else None
             logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"], active)
         logits, values, mask = logits.float(), values.float(), mb["active"]
-        new_logprob = log_prob(logits, mb["actions"], self.nvec)
+        new_logprob, entropies = log_prob_and_entropy(logits, mb["actions"], self.nvec)
         adv = normalize_advantages(mb["advantages"], mask) if cfg.norm_adv else mb["advantages"]
         pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef)
         vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef)
-        ent = masked_mean(entropy(logits, self.nvec), mask)
+        ent = masked_mean(entropies, mask)
         loss = pg - cfg.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
 
