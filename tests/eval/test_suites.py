@@ -298,3 +298,28 @@ def test_run_all_suites_with_rule_based_driver(town):
     assert stop["changed"]["changed"] == 0
     waiting = res["crosswalks"]["summary"]["waiting"]
     assert waiting["n"] == 2 and 0.0 <= waiting["passed"]["lo"] <= waiting["passed"]["hi"] <= 1.0
+
+
+def test_turn_lane_entry_waypoint_variant_names_the_correct_lane():
+    """With `entry_waypoint`, the first waypoint lies on the correct corridor that far before the
+    junction and the exit waypoints follow; without it the exit waypoints come first."""
+    from selfplaydrive.eval.suites.geometry import cumlen, project
+    from selfplaydrive.eval.suites.turn_lanes import TurnLaneSuite
+    from selfplaydrive.maps.loader import load_map
+
+    town = load_map("default")
+    plain = TurnLaneSuite().generate(town, np.random.default_rng(2), 4)
+    named = TurnLaneSuite(entry_waypoint=15.0).generate(town, np.random.default_rng(2), 4)
+    assert len(plain) == len(named) == 4
+    for item in plain:
+        assert item.scenario.num_waypoints[0] == 2
+    for item in named:
+        sc, corridor = item.scenario, item.paths["corridor"]
+        assert sc.num_waypoints[0] == 3
+        s, lat, _ = project(corridor, sc.waypoints[0, :1].astype(np.float64))
+        assert abs(lat[0]) < 0.01
+        assert s[0] == pytest.approx(item.info["entry_arc_m"] - 15.0, abs=0.01)
+        assert item.info["start_distance_m"] > 15.0
+        assert cumlen(corridor)[-1] > s[0]
+    with pytest.raises(ValueError, match="entry_waypoint"):
+        TurnLaneSuite(entry_waypoint=-1.0)
