@@ -246,7 +246,7 @@ def test_every_eval_option_is_valid(option):
     from selfplaydrive.eval.suites.report import PAPER_COUNTS, default_suites
 
     cfg = compose("eval", [f"eval={option}"])
-    assert set(cfg.eval) == {"analyses", "batch_size", "suites", "longform", "diversity"}
+    assert set(cfg.eval) == {"analyses", "batch_size", "suites", "longform", "completion", "diversity"}
     assert set(cfg.eval.analyses) <= set(ANALYSES)
     assert set(PAPER_COUNTS) <= set(cfg.eval.suites) <= set(default_suites())
     assert all(v >= 1 for v in cfg.eval.suites.values())

@@ -90,6 +90,15 @@ def test_eval_rule_based_writes_reports(tmp_path, capsys):
     assert suites["red_lights"]["generated"] == 4 and suites["spawn_sanity"]["summary"]["n"] == 8
     longform = json.loads((out / "longform.json").read_text())
     assert longform["km"] > 0
+    # completion: the eval=quick option's 2 world-episodes in the paper's spawner, every missed
+    # waypoint charged to one outcome
+    done = json.loads((out / "completion.json").read_text())
+    assert done["episodes"] == 2 and done["protocol"]["spawner"] == "the paper's spawner"
+    outcomes = done["outcomes"].values()
+    assert sum(o["agents"] for o in outcomes) == done["agents"] > 0
+    missed = sum(o["missed_share"] for o in outcomes)
+    assert missed == pytest.approx(1.0 - done["waypoint_completion"])
+    assert "| vehicle_collision |" in (out / "completion.md").read_text()
     meta = json.loads((out / "run_meta.json").read_text())
     assert meta["seed"] == 0
     assert len(meta["git_commit"]) == 40 or meta["git_commit"] == "unknown"
@@ -284,5 +293,5 @@ def test_eval_unknown_analysis_is_a_config_error(tmp_path):
     from selfplaydrive.eval.app import run_eval
 
     cfg = compose("eval", ["eval=quick", "eval.analyses=[suites,carla]"])
-    with pytest.raises(ConfigError, match=r"carla.*valid choices: suites, longform, diversity"):
+    with pytest.raises(ConfigError, match=r"carla.*valid choices: suites, longform, completion, diversity"):
         run_eval(cfg, tmp_path)

@@ -22,7 +22,7 @@ from typing import Any
 
 from selfplaydrive.errors import CheckpointError, ConfigError
 
-ANALYSES = ("suites", "longform", "diversity")
+ANALYSES = ("suites", "longform", "completion", "diversity")
 
 
 class SpecPolicy:
@@ -311,6 +311,49 @@ def _run_diversity(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_d
     return {**paths, **files}
 
 
+def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_dir: Path) -> dict[str, Path]:
+    """Waypoint completion under the paper's fixed evaluation coefficients, in the policy's
+    training spawner (its agents per world, routes and episode lengths), with every missed
+    waypoint charged to how its agent ended (`eval.misses`)."""
+    from selfplaydrive.eval.misses import completion_breakdown
+    from selfplaydrive.eval.report import write_report
+
+    c = cfg.eval.completion
+    spawner, source = _eval_spawner(target)
+    env = make_env(spawner, int(c.num_worlds), seed=int(cfg.seed))
+    _say(f"completion: {int(c.world_episodes)} world-episodes in {int(c.num_worlds)} worlds ({source}) ...")
+    table = completion_breakdown(env, target.policy, int(c.world_episodes), seed=int(cfg.seed))
+    protocol = {
+        "coefficients": "the paper's fixed evaluation values (conf/reward/eval.yaml)",
+        "spawner": source,
+        "num_worlds": int(c.num_worlds),
+        "seed": int(cfg.seed),
+        "actions": "sampled",
+    }
+    paths = write_report({"protocol": protocol, **table.to_dict()}, run_dir, "completion")
+    head = "# Waypoint completion and where the missed waypoints go\n\n"
+    lines = [f"- {k}: {v}" for k, v in protocol.items()]
+    paths["markdown"].write_text(head + "\n".join(lines) + "\n\n" + table.markdown() + "\n")
+    return paths
+
+
+def _eval_spawner(target: EvalTarget) -> tuple[Any, str]:
+    """The training run's spawner drawing the fixed evaluation coefficients (the paper's spawner
+    for a built-in driver or a checkpoint without its run config), and which it is."""
+    from selfplaydrive.scenario.conditioning import ConditioningSampler
+    from selfplaydrive.scenario.spawner import PaperSpawner
+
+    if target.run_config is None or "spawner" not in target.run_config:
+        return PaperSpawner(conditioning=ConditioningSampler(mode="eval")), "the paper's spawner"
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.builder import build_spawner
+
+    run_cfg = OmegaConf.create(OmegaConf.to_container(target.run_config, resolve=False))
+    run_cfg.reward.mode = "eval"
+    return build_spawner(run_cfg), "the training run's spawner"
+
+
 def _training_spawner(target: EvalTarget) -> Any:
     """The spawner of the policy's training run (its coefficient distribution), else the paper's."""
     from selfplaydrive.scenario.spawner import PaperSpawner
@@ -322,7 +365,12 @@ def _training_spawner(target: EvalTarget) -> Any:
     return build_spawner(target.run_config)  # with the run's reward group's sampler
 
 
-RUNNERS = {"suites": _run_suites, "longform": _run_longform, "diversity": _run_diversity}
+RUNNERS = {
+    "suites": _run_suites,
+    "longform": _run_longform,
+    "completion": _run_completion,
+    "diversity": _run_diversity,
+}
 
 
 def _suite_summaries(result: dict[str, Any]) -> dict[str, Any]:
