@@ -298,6 +298,7 @@ def main(argv: list[str] | None = None) -> int:
         "maps": {name: map_report(name, args, work) for name in args.maps},
     }
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     (out / "REPORT.md").write_text(markdown(report))
     print(markdown(report))
