@@ -319,7 +319,9 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
     from selfplaydrive.eval.report import write_report
 
     c = cfg.eval.completion
-    spawner, source = _eval_spawner(target)
+    spawner = _training_spawner(target, eval_coefficients=True)
+    own = target.run_config is not None and "spawner" in target.run_config
+    source = "the training run's spawner" if own else "the paper's spawner"
     env = make_env(spawner, int(c.num_worlds), seed=int(cfg.seed))
     _say(f"completion: {int(c.world_episodes)} world-episodes in {int(c.num_worlds)} worlds ({source}) ...")
     table = completion_breakdown(env, target.policy, int(c.world_episodes), seed=int(cfg.seed))
@@ -337,32 +339,23 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
     return paths
 
 
-def _eval_spawner(target: EvalTarget) -> tuple[Any, str]:
-    """The training run's spawner drawing the fixed evaluation coefficients (the paper's spawner
-    for a built-in driver or a checkpoint without its run config), and which it is."""
+def _training_spawner(target: EvalTarget, eval_coefficients: bool = False) -> Any:
+    """The spawner of the policy's training run, else the paper's; its coefficients drawn from
+    the run's training distribution, or (`eval_coefficients`) the paper's fixed evaluation values."""
     from selfplaydrive.scenario.conditioning import ConditioningSampler
     from selfplaydrive.scenario.spawner import PaperSpawner
 
     if target.run_config is None or "spawner" not in target.run_config:
-        return PaperSpawner(conditioning=ConditioningSampler(mode="eval")), "the paper's spawner"
+        return PaperSpawner(conditioning=ConditioningSampler(mode="eval") if eval_coefficients else None)
     from omegaconf import OmegaConf
 
     from selfplaydrive.builder import build_spawner
 
-    run_cfg = OmegaConf.create(OmegaConf.to_container(target.run_config, resolve=False))
-    run_cfg.reward.mode = "eval"
-    return build_spawner(run_cfg), "the training run's spawner"
-
-
-def _training_spawner(target: EvalTarget) -> Any:
-    """The spawner of the policy's training run (its coefficient distribution), else the paper's."""
-    from selfplaydrive.scenario.spawner import PaperSpawner
-
-    if target.run_config is None or "spawner" not in target.run_config:
-        return PaperSpawner()
-    from selfplaydrive.builder import build_spawner
-
-    return build_spawner(target.run_config)  # with the run's reward group's sampler
+    run_cfg = target.run_config
+    if eval_coefficients:
+        run_cfg = OmegaConf.create(OmegaConf.to_container(run_cfg, resolve=False))
+        run_cfg.reward.mode = "eval"
+    return build_spawner(run_cfg)  # with the run's reward group's sampler
 
 
 RUNNERS = {

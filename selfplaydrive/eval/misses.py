@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive.sim.vec_env import EVER_BITS
+
 OUTCOMES = ("all_reached", "vehicle_collision", "pedestrian", "road_edge", "off_route", "pending_ahead")
-EV_COLLIDE, EV_PED, EV_OFFROAD = 1, 2, 4  # SD_EV_* (_sim/common.pxd)
 
 
 def classify(ever: np.ndarray, reached: np.ndarray, assigned: np.ndarray, ahead_m: np.ndarray) -> np.ndarray:
@@ -41,7 +42,13 @@ def classify(ever: np.ndarray, reached: np.ndarray, assigned: np.ndarray, ahead_
     done = np.asarray(reached) >= np.asarray(assigned)
     behind = np.nan_to_num(np.asarray(ahead_m, dtype=np.float64), nan=1.0) < 0.0
     return np.select(
-        [done, (ever & EV_COLLIDE) != 0, (ever & EV_PED) != 0, (ever & EV_OFFROAD) != 0, behind],
+        [
+            done,
+            (ever & EVER_BITS["collision"]) != 0,
+            (ever & EVER_BITS["pedestrian_collision"]) != 0,
+            (ever & EVER_BITS["offroad"]) != 0,
+            behind,
+        ],
         [0, 1, 2, 3, 4],
         default=5,
     )
