@@ -218,8 +218,14 @@ def torchrun_run_dir(argv: Sequence[str], environ: Mapping[str, str] | None = No
 
 
 def cmd_train(argv: Sequence[str]) -> int:
-    """``selfplaydrive train [overrides] [-m]``."""
-    return run_hydra("train", train_task, torchrun_run_dir(argv))
+    """``selfplaydrive train [overrides] [-m]``. Under torchrun, the process ends here with
+    the run's status (`exit_distributed`: a clean exit, not an abort in Gloo's teardown)."""
+    status = run_hydra("train", train_task, torchrun_run_dir(argv))
+    if "torch.distributed" in sys.modules:  # only a run that trained has torch loaded
+        from selfplaydrive.trainers.ppo.dist import exit_distributed
+
+        exit_distributed(status)
+    return status
 
 
 def eval_task(cfg: Any) -> Any:

@@ -24,6 +24,7 @@ from ppo_helpers import lane_env
 from selfplaydrive.errors import CheckpointError
 from selfplaydrive.models import DeepSetsModel
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
+from selfplaydrive.trainers.ppo.dist import exit_distributed
 from selfplaydrive.trainers.ppo.logging import ProgressLogger
 from selfplaydrive.trainers.run import train_run
 
@@ -106,3 +107,4 @@ if __name__ == "__main__":
         resume_mismatch(Path(sys.argv[2]))
     else:
         main(Path(sys.argv[1]))
+    exit_distributed(0)  # an exit through the interpreter's teardown sometimes aborted in Gloo
