@@ -15,3 +15,5 @@ cdef void term_crosswalk_yield(const Sim* sim, const Params* prm, const Atlas* a
                                int32_t stride) noexcept nogil
 cdef void term_wrong_way(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
                          int32_t w, float* out, int32_t stride) noexcept nogil
+cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
+                         int32_t w, float* out, int32_t stride) noexcept nogil

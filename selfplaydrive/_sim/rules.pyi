@@ -1,4 +1,4 @@
-"""Type stub of the Cython module `selfplaydrive._sim.rules`: the rule reward terms of issue #15
+"""Type stub of the Cython module `selfplaydrive._sim.rules`: the rule reward terms (issues #15, #16)
 are cdef only; Python sees their addresses (rewards/rules.py registers them)."""
 
 from typing import Any

@@ -1,7 +1,8 @@
 # cython: language_level=3
 """Rule-complete reward terms (issue #15; the failure modes of paper section 5.1): entering a
 junction area on red by any path, crossing a STOP line without stopping, entering a crosswalk
-a pedestrian is on or about to step on, and driving against the lane direction.
+a pedestrian is on or about to step on, driving against the lane direction, and turning
+through a junction lane the lane entered from does not lead to (paper 5.3).
 
 Each is an `sd_reward_term_fn` component (selfplaydrive_abi.h) whose args are the packed
 tables of selfplaydrive/rewards/rule_tables.py: a header (state offset, layout version, number
@@ -40,6 +41,7 @@ def rule_term_addresses():
         "stop_sign": <uintptr_t>term_stop_sign,
         "crosswalk_yield": <uintptr_t>term_crosswalk_yield,
         "wrong_way": <uintptr_t>term_wrong_way,
+        "turn_lane": <uintptr_t>term_turn_lane,
     }
 
 
@@ -352,3 +354,86 @@ cdef void term_wrong_way(const Sim* sim, const Params* prm, const Atlas* atlas, 
             against = True
         if against and not along:
             out[<int64_t>a * stride] = -prm.dt
+
+
+# ---- turn_lane -------------------------------------------------------------------------------
+cdef enum:
+    T_KIND = 6        # turn_records: (ax, ay, ex, ey, ux, uy, kind, lane, n, p_0 ..)
+    T_LANE = 7
+    T_NPRED = 8
+    T_PREDS = 9
+
+
+cdef inline int crosses_gate(const float* g, float px, float py, float qx, float qy) noexcept nogil:
+    """+1 if the move p -> q crosses gate g = (ax, ay, ex, ey, ux, uy, ..) along u (from
+    before the gate's line to on or beyond it), -1 if against u, 0 if it misses the gate."""
+    cdef float sp = (px - g[0]) * g[4] + (py - g[1]) * g[5]
+    cdef float sq = (qx - g[0]) * g[4] + (qy - g[1]) * g[5]
+    cdef float f, cx, cy, t
+    if (sp < 0.0) == (sq < 0.0):
+        return 0
+    f = sp / (sp - sq)
+    cx = px + f * (qx - px)
+    cy = py + f * (qy - py)
+    t = ((cx - g[0]) * g[2] + (cy - g[1]) * g[3]) / (g[2] * g[2] + g[3] * g[3])
+    if not (0.0 <= t <= 1.0):
+        return 0
+    return 1 if sp < 0.0 else -1
+
+
+cdef inline bint leads_from(const float* g, int entry) noexcept nogil:
+    """Check gate g's junction lane is a successor of lane `entry`."""
+    cdef int k
+    for k in range(<int>g[T_NPRED]):
+        if <int>g[T_PREDS + k] == entry:
+            return True
+    return False
+
+
+cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
+                         int32_t w, float* out, int32_t stride) noexcept nogil:
+    """-1 on the step the centre crosses the mid gate of one or more junction lanes, heading
+    within the parameter angle of one, none of which the entry lane on record leads to; else
+    0. One state column: 0 = no entry on record, else 1 + the lane whose end gate the centre
+    crossed last (forward; the lowest lane if a move crosses several). Entry gates are read
+    before check gates (a move crosses a junction's start before a lane's middle); crossing
+    check gates decides and clears the record. Params: cos of the largest heading deviation."""
+    cdef int a, i, j, e, s, A = sim.A, off = <int>args[0]
+    cdef float cmax = args[H_PARAMS], px, py, qx, qy
+    cdef const float* g
+    cdef float* st
+    cdef bint crossed, legal
+    cdef Cell c
+    for a in range(A):
+        i = w * A + a
+        if not sim.active[i]:
+            continue
+        out[<int64_t>a * stride] = 0.0
+        if not map_cell(args, 1, sim.map_id[w], sim.x[i], sim.y[i], &c):
+            continue
+        st = &sim.term_state[<int64_t>i * sim.term_state_dim + off]
+        px, py, qx, qy = sim.px[i], sim.py[i], sim.x[i], sim.y[i]
+        e = -1
+        for j in range(c.n):
+            g = record(&c, j)
+            if g[T_KIND] == 0.0 and (e < 0 or <int>g[T_LANE] < e) and crosses_gate(g, px, py, qx, qy) > 0:
+                e = <int>g[T_LANE]
+        s = e + 1 if e >= 0 else <int>st[0]
+        if s == 0:  # nothing on record: a check gate would decide nothing
+            continue
+        crossed = False
+        legal = False
+        for j in range(c.n):
+            g = record(&c, j)
+            if g[T_KIND] == 0.0 or sim.hcos[i] * g[4] + sim.hsin[i] * g[5] < cmax:
+                continue
+            if crosses_gate(g, px, py, qx, qy) != 0:
+                crossed = True
+                if leads_from(g, s - 1):
+                    legal = True
+                    break
+        if crossed:
+            if not legal:
+                out[<int64_t>a * stride] = -1.0
+            s = 0
+        st[0] = <float>s

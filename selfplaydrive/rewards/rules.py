@@ -10,6 +10,9 @@ reward components, each off by default (the paper configuration and its digests 
   (5.1: the policy yielded to 39 % of crossing pedestrians).
 - ``wrong_way``: -1 per second (-dt per step) of driving against the direction of the lane the
   centre lies on (the oncoming-lane bypass, which the paper's lane association does not see).
+- ``turn_lane``: -1 on driving through a junction lane the lane the agent entered the junction
+  from does not lead to (paper 5.3 "Turning from the Correct Lane"; issue #16 item 3). One
+  column of per-agent state: the entry lane on record.
 
 Each is a `RuleTerm`, a map-bound term: ``bind(maps)`` packs the maps' tables into the args of
 the `KernelTerm` the env steps (_sim/rules.pyx; layout in rewards/rule_tables.py). Select one
@@ -41,7 +44,20 @@ from selfplaydrive.obs.rule_features import CROSSWALK_HORIZON, CROSSWALK_MARGIN
 from selfplaydrive.rewards.components import KernelTerm
 from selfplaydrive.rewards.rule_tables import CELL, REACH, grid_body, pack
 
-__all__ = ["RULE_TERMS", "RuleTerm", "crosswalk_records", "lane_records", "stop_records", "zone_records"]
+__all__ = [
+    "RULE_TERMS",
+    "TURN_PREDECESSORS",
+    "RuleTerm",
+    "crosswalk_records",
+    "lane_records",
+    "stop_records",
+    "turn_records",
+    "zone_records",
+]
+
+TURN_PREDECESSORS = 4
+"""Most entry lanes a `turn_records` check record lists (the bundled town needs 1)."""
+TURN_ENTRY, TURN_CHECK = 0.0, 1.0  # record kinds of `turn_records`
 
 
 @dataclass(frozen=True)
@@ -165,6 +181,73 @@ def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     return rec, np.concatenate([lo, hi], axis=1), float(rec[:, 5].min()) if len(rec) else 0.0
 
 
+def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
+    """Gates of the turn_lane term: (ax, ay, ex, ey, ux, uy, kind, lane, n, p_0 .. p_{K-1})
+    with K = `TURN_PREDECESSORS`, and boxes.
+
+    Each gate is the segment a .. a + e across a lane, e perpendicular to the lane's unit
+    direction u there, |e| = the lane's width (half a width either side of the centerline).
+    Kind `TURN_ENTRY`: at the last point of a non-junction vehicle lane with a vehicle
+    successor in a junction (n = 0). Kind `TURN_CHECK`: at half the arc length of a junction
+    vehicle lane; p_0 .. p_{n-1} are its non-junction vehicle predecessors (the entry lanes it
+    is legal from; the rest of the row is -1). Lane ids index the map's `lanes`.
+
+    Raises:
+        ConfigError: A junction lane with more than `TURN_PREDECESSORS` such predecessors.
+    """
+    lanes = road_map.lanes
+    vehicle = np.asarray(lanes.kind) != int(LaneKind.BICYCLE)
+    junction = np.asarray(lanes.in_junction, bool) & vehicle
+    rows = []
+    for i in np.flatnonzero(vehicle):
+        i = int(i)
+        if junction[i]:
+            preds = [int(p) for p in lanes.predecessors(i) if vehicle[p] and not junction[p]]
+            if len(preds) > TURN_PREDECESSORS:
+                raise ConfigError(
+                    f"reward term 'turn_lane': junction lane {i} of map {road_map.name!r} has "
+                    f"{len(preds)} entry lanes; the tables hold at most TURN_PREDECESSORS = {TURN_PREDECESSORS}"
+                )
+            point, u = _point_at_half_length(lanes.centerlines[i].astype(np.float64))
+            rows.append(_gate(point, u, float(lanes.width[i]), TURN_CHECK, i, preds))
+        elif any(junction[s] for s in lanes.successors(i)):
+            p = lanes.centerlines[i].astype(np.float64)
+            rows.append(_gate(p[-1], _last_direction(p), float(lanes.width[i]), TURN_ENTRY, i, []))
+    rec = np.array(rows, np.float64).reshape(-1, 9 + TURN_PREDECESSORS)
+    b = rec[:, :2] + rec[:, 2:4]
+    boxes = np.concatenate([np.minimum(rec[:, :2], b), np.maximum(rec[:, :2], b)], axis=1)
+    return rec, boxes, 0.0
+
+
+def _gate(point: np.ndarray, u: np.ndarray, width: float, kind: float, lane: int, preds: list[int]) -> list[float]:
+    """One `turn_records` row: the gate across the lane at `point`, its direction `u` there."""
+    e = np.array([-u[1], u[0]]) * width  # left normal, a lane width long
+    a = point - 0.5 * e
+    pad = [-1.0] * (TURN_PREDECESSORS - len(preds))
+    return [a[0], a[1], e[0], e[1], u[0], u[1], kind, lane, len(preds), *preds, *pad]
+
+
+def _pieces(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The centerline's pieces of nonzero length: start points, unit directions, lengths."""
+    d = np.diff(p, axis=0)
+    ln = np.hypot(d[:, 0], d[:, 1])
+    ok = ln > 1e-6
+    return p[:-1][ok], d[ok] / ln[ok, None], ln[ok]
+
+
+def _last_direction(p: np.ndarray) -> np.ndarray:
+    return _pieces(p)[1][-1]
+
+
+def _point_at_half_length(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point at half the centerline's arc length and the unit direction of its piece."""
+    start, u, ln = _pieces(p)
+    ends = np.cumsum(ln)
+    half = 0.5 * ends[-1]
+    k = min(int(np.searchsorted(ends, half)), len(ln) - 1)
+    return start[k] + u[k] * (half - (ends[k] - ln[k])), u[k]
+
+
 def _lane_direction(road_map: RoadMap, lane: int, pts: np.ndarray) -> np.ndarray:
     """Unit direction of `lane`'s centerline segment nearest to the line points `pts`."""
     p = road_map.lanes.centerlines[lane].astype(np.float64)
@@ -212,5 +295,13 @@ RULE_TERMS = (
         lane_records,
         doc="R = -dt (-1 per second) driving against the lane the centre lies on",
         grid=(5.0, 0.05),  # tests the current position only: finer cells, reach for rounding
+    ),
+    RuleTerm(
+        "turn_lane",
+        (math.cos(math.radians(45.0)),),
+        ("cos of the largest heading deviation from the junction lane",),
+        turn_records,
+        state_dim=1,
+        doc="R = -1 on driving through a junction lane the lane entered from does not lead to",
     ),
 )

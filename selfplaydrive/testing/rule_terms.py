@@ -4,8 +4,8 @@ Plain loops over every record of a world's map (no grid), in float32 with the ke
 operations, so a kernel and its reference agree bit for bit on random states
 (tests/rewards/test_rules.py). Each function takes the env state after a step (`VecEnv.state`
 or any object with the same arrays), the env's maps and the term's parameters, and returns the
-(N,) term values of the active slots (0 elsewhere); `stop_sign` also takes the `term_state`
-column before the step and returns the column after it.
+(N,) term values of the active slots (0 elsewhere); `stop_sign` and `turn_lane` also take their
+`term_state` column before the step and return the column after it.
 """
 
 from __future__ import annotations
@@ -16,7 +16,14 @@ from typing import Any
 import numpy as np
 
 from selfplaydrive.maps.roadmap import RoadMap
-from selfplaydrive.rewards.rules import crosswalk_records, lane_records, stop_records, zone_records
+from selfplaydrive.rewards.rules import (
+    TURN_ENTRY,
+    crosswalk_records,
+    lane_records,
+    stop_records,
+    turn_records,
+    zone_records,
+)
 
 F = np.float32
 RED = 1  # SD_LIGHT_RED
@@ -28,7 +35,13 @@ def _table(road_map: RoadMap, kind: str) -> np.ndarray:
     """The map's float32 records of one term (as packed), built once per map."""
     key = (id(road_map), kind)
     if key not in _TABLES or _TABLES[key][0] is not road_map:
-        build = {"zone": zone_records, "stop": stop_records, "cross": crosswalk_records, "lane": lane_records}
+        build = {
+            "zone": zone_records,
+            "stop": stop_records,
+            "cross": crosswalk_records,
+            "lane": lane_records,
+            "turn": turn_records,
+        }
         _TABLES[key] = (road_map, build[kind](road_map)[0].astype(F))
     return _TABLES[key][1]
 
@@ -219,3 +232,43 @@ def wrong_way(st: Any, maps: Sequence[RoadMap], params: Sequence[float], dt: flo
             if (on & ~along).any() and not (on & along).any():
                 out[i] = -F(dt)
     return out
+
+
+def turn_lane(
+    st: Any, maps: Sequence[RoadMap], params: Sequence[float], state: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(-1 where the centre crossed junction lanes the entry lane on record does not lead to,
+    the state column after the step: 0 or 1 + the entry lane)."""
+    cmax = F(params[0])
+    W, A = _agents(st)
+    tables = [_table(m, "turn") for m in maps]
+    out, new = np.zeros(W * A, F), np.array(state, F).copy()
+    for w in range(W):
+        g = tables[int(st.map_id[w])]
+        entry, check = g[g[:, 6] == F(TURN_ENTRY)], g[g[:, 6] != F(TURN_ENTRY)]
+        for i in range(w * A, (w + 1) * A):
+            if not st.active[i]:
+                continue
+            side = _gate_sides(entry, st.px[i], st.py[i], st.x[i], st.y[i])
+            crossed_entries = entry[side > 0, 7]
+            s = int(crossed_entries.min()) + 1 if len(crossed_entries) else int(state[i])
+            along = st.hcos[i] * check[:, 4] + st.hsin[i] * check[:, 5] >= cmax
+            hit = check[along & (_gate_sides(check, st.px[i], st.py[i], st.x[i], st.y[i]) != 0)]
+            if s > 0 and len(hit):
+                legal = (hit[:, 9:] == F(s - 1)) & (np.arange(hit.shape[1] - 9) < hit[:, 8:9])
+                out[i] = F(0.0) if legal.any() else F(-1.0)
+                s = 0
+            new[i] = F(s)
+    return out, new
+
+
+def _gate_sides(g: np.ndarray, px: F, py: F, qx: F, qy: F) -> np.ndarray:
+    """Per gate: +1 crossed along its lane, -1 against it, 0 missed (rules.pyx crosses_gate)."""
+    sp = (px - g[:, 0]) * g[:, 4] + (py - g[:, 1]) * g[:, 5]
+    sq = (qx - g[:, 0]) * g[:, 4] + (qy - g[:, 1]) * g[:, 5]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = sp / (sp - sq)
+        cx, cy = px + f * (qx - px), py + f * (qy - py)
+        t = ((cx - g[:, 0]) * g[:, 2] + (cy - g[:, 1]) * g[:, 3]) / (g[:, 2] * g[:, 2] + g[:, 3] * g[:, 3])
+    hit = ((sp < 0) != (sq < 0)) & (t >= 0) & (t <= 1)
+    return np.where(hit, np.where(sp < 0, 1, -1), 0)

@@ -1,6 +1,7 @@
-"""Rule-complete reward terms (issue #15 item 1): red_intersection, stop_sign, crosswalk_yield
-and wrong_way, hand-computed on a straight test road, equal to their NumPy references on
-random rollouts, deterministic across threads, with their state saved and restored."""
+"""Rule-complete reward terms (issue #15 item 1, issue #16 item 3): red_intersection, stop_sign,
+crosswalk_yield, wrong_way and turn_lane, hand-computed on test roads, equal to their NumPy
+references on random rollouts, deterministic across threads, with their state saved and
+restored."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ from selfplaydrive.sim import VecEnv
 from selfplaydrive.sim.actions import ContinuousActions
 from selfplaydrive.testing import rule_terms
 
-RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way")
+RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way", "turn_lane")
+STATEFUL = ("stop_sign", "turn_lane")  # their references take and return their state column
 Y0, Y1 = -1.75, 1.75  # [m] centerlines of the eastbound lane 0 and the westbound lane 1
 X0 = -100.0  # [m] the map is compiled centred on its bounds: road x below is local x - X0
 
@@ -176,9 +178,11 @@ def random_rollout(maps, steps, threads=1, worlds=4, seed=3, check=True):
     rng = np.random.default_rng(seed)
     params = {n: get_term(n).params for n in RULES}
     cols = {n: env.term_names.index(n) for n in RULES}
+    offset = {c.name: int(c.term.args[0]) for c in env.reward.columns if c.name in STATEFUL}
+    assert sorted(offset.values()) == [0, 1]
     fired = dict.fromkeys(RULES, 0)
     for _ in range(steps):
-        before = env.state.term_state[:, 0].copy()
+        before = {n: env.state.term_state[:, k].copy() for n, k in offset.items()}
         env.step(np.stack([rng.integers(3, 7, env.num_agents), rng.integers(4, 9, env.num_agents)], axis=1))
         if not check:
             continue
@@ -190,8 +194,9 @@ def random_rollout(maps, steps, threads=1, worlds=4, seed=3, check=True):
             "crosswalk_yield": rule_terms.crosswalk_yield(st, env.maps, params["crosswalk_yield"]),
             "wrong_way": rule_terms.wrong_way(st, env.maps, params["wrong_way"], env.params.dt),
         }
-        ref["stop_sign"], new_state = rule_terms.stop_sign(st, env.maps, params["stop_sign"], before)
-        np.testing.assert_array_equal(st.term_state[live, 0], new_state[live])
+        for n in STATEFUL:
+            ref[n], new_state = getattr(rule_terms, n)(st, env.maps, params[n], before[n])
+            np.testing.assert_array_equal(st.term_state[live, offset[n]], new_state[live], err_msg=n)
         for n in RULES:
             np.testing.assert_array_equal(env.reward_terms[live, cols[n]], ref[n][live], err_msg=n)
             fired[n] += int(np.count_nonzero(ref[n][live]))
@@ -212,6 +217,9 @@ def test_kernels_equal_numpy_references_on_random_rollouts(road):
     grid = compile_map(el)
     _, fired = random_rollout([load_map("default"), grid], steps=150)
     assert fired["red_intersection"] > 0 and fired["wrong_way"] > 0 and fired["stop_sign"] > 0, fired
+    # wrong-lane turns need the bundled town's multi-lane approaches
+    _, fired = random_rollout(load_map("default"), steps=150)
+    assert fired["turn_lane"] > 0, fired
 
 
 def test_deterministic_at_one_and_two_threads():
@@ -225,7 +233,7 @@ def test_deterministic_at_one_and_two_threads():
 def test_state_round_trip_keeps_the_term_state():
     town = load_map("default")
     env, _ = random_rollout(town, 40, check=False)
-    assert env.buffers["term_state"].shape == (env.num_agents, 1) and env.buffers["term_state"].any()
+    assert env.buffers["term_state"].shape == (env.num_agents, 2) and env.buffers["term_state"].any()
     saved = env.get_state()
     rng = np.random.default_rng(9)
     acts = [
