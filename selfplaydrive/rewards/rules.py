@@ -206,7 +206,8 @@ def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
             if len(preds) > TURN_PREDECESSORS:
                 raise ConfigError(
                     f"reward term 'turn_lane': junction lane {i} of map {road_map.name!r} has "
-                    f"{len(preds)} entry lanes; the tables hold at most TURN_PREDECESSORS = {TURN_PREDECESSORS}"
+                    f"{len(preds)} entry lanes; the tables hold at most "
+                    f"TURN_PREDECESSORS = {TURN_PREDECESSORS}"
                 )
             point, u = _point_at_half_length(lanes.centerlines[i].astype(np.float64))
             rows.append(_gate(point, u, float(lanes.width[i]), TURN_CHECK, i, preds))
@@ -219,7 +220,9 @@ def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     return rec, boxes, 0.0
 
 
-def _gate(point: np.ndarray, u: np.ndarray, width: float, kind: float, lane: int, preds: list[int]) -> list[float]:
+def _gate(
+    point: np.ndarray, u: np.ndarray, width: float, kind: float, lane: int, preds: list[int]
+) -> list[float]:
     """One `turn_records` row: the gate across the lane at `point`, its direction `u` there."""
     e = np.array([-u[1], u[0]]) * width  # left normal, a lane width long
     a = point - 0.5 * e

@@ -5,6 +5,7 @@ restored."""
 
 from __future__ import annotations
 
+import itertools
 from types import SimpleNamespace
 
 import numpy as np
@@ -24,6 +25,7 @@ from selfplaydrive.maps.elements import (
 )
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.rewards import TERM_NAMES, KernelTerm, LinearReward, get_term
+from selfplaydrive.rewards.rules import turn_records
 from selfplaydrive.scenario.lights import GREEN, RED
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim import VecEnv
@@ -387,3 +389,129 @@ def test_rule_terms_without_their_observation_warn():
         warnings.filterwarnings("error", message="reward terms")
         build_env(compose("train", ["+reward.terms.stop_sign=1.0", "obs=rules", "env.num_worlds=1"]))
         build_env(compose("train", ["+reward.terms.red_intersection=1.0", "env.num_worlds=1"]))
+
+
+# -- turn_lane on a hand-built junction ------------------------------------------------------
+R_TURN = 15.0  # [m] radius of the left turn
+
+
+def turn_junction():
+    """A two-lane eastbound approach (x -60 .. 0; left lane 0 at y = 1.75, right lane 1 at
+    y = -1.75, changes between them legal) into a junction: lane 0 leads to the left turn JL
+    (lane 2, a quarter circle of radius `R_TURN` ending northbound), lane 1 to the straight JS
+    (lane 3, 20 m); exit lanes 4 (north) and 5 (east)."""
+    th = np.linspace(0.0, np.pi / 2, 16)
+    left = np.stack([R_TURN * np.sin(th), Y1 + R_TURN * (1.0 - np.cos(th))], axis=1)
+    top = left[-1]
+    lanes = [
+        LaneElement(
+            np.array([[-60.0, Y1], [0.0, Y1]]), 3.5, 14.0, successors=[2], right=1, right_change_legal=True
+        ),
+        LaneElement(
+            np.array([[-60.0, Y0], [0.0, Y0]]), 3.5, 14.0, successors=[3], left=0, left_change_legal=True
+        ),
+        LaneElement(left, 3.5, 14.0, successors=[4], in_junction=True),
+        LaneElement(np.array([[0.0, Y0], [20.0, Y0]]), 3.5, 14.0, successors=[5], in_junction=True),
+        LaneElement(np.array([top, top + np.array([0.0, 40.0])]), 3.5, 14.0),
+        LaneElement(np.array([[20.0, Y0], [60.0, Y0]]), 3.5, 14.0),
+    ]
+    return compile_map(MapElements(name="turn_junction", source="tests/rewards/test_rules.py", lanes=lanes))
+
+
+@pytest.fixture(scope="module")
+def junction():
+    return turn_junction()
+
+
+def centre_path(road_map, pieces):
+    """Points 1 m apart along the joined `pieces`: lane ids (their centerlines, local frame)
+    or (2,) points in the frame the elements were written in (shifted like the lanes)."""
+    shift = road_map.lanes.centerlines[5][-1].astype(np.float64) - [60.0, Y0]
+    pts = np.concatenate(
+        [
+            road_map.lanes.centerlines[p].astype(np.float64)
+            if isinstance(p, int)
+            else np.asarray(p)[None] + shift
+            for p in pieces
+        ]
+    )
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    keep = np.concatenate([[True], np.diff(s) > 1e-9])
+    t = np.arange(0.0, s[-1], 1.0)
+    return np.stack([np.interp(t, s[keep], pts[keep, 0]), np.interp(t, s[keep], pts[keep, 1])], axis=1)
+
+
+def drive_path(road_map, paths, reset_before=()):
+    """Slot 0 posed on each point of the joined `paths` in turn and stepped once towards the
+    next (speed = 1 m / dt, accel and steering 0). Returns the turn_lane column (steps,) and
+    its state (steps,) after each step; the world restarts before path k in `reset_before`."""
+    start = paths[0][0]
+    sc = blank_scenario(road_map, 0, start, 60.0)
+    put_agent(sc, 0, start, 0.0, 0.0, (4.5, 2.0), 1, np.array([[500.0, 500.0]]))
+    env = VecEnv(
+        road_map, FixedScenarioSpawner([sc]), 1, actions=ContinuousActions(), reward=reward("turn_lane")
+    )
+    env.reset(0)
+    col = env.term_names.index("turn_lane")
+    off = next(int(c.term.args[0]) for c in env.reward.columns if c.name == "turn_lane")
+    values, states = [], []
+    for k, path in enumerate(paths):
+        if k in reset_before:
+            env.reset_worlds([0])
+        for p, q in itertools.pairwise(path):
+            d = q - p
+            env.set_poses([0], p[None], np.array([np.arctan2(d[1], d[0])]), np.array([1.0 / env.params.dt]))
+            env.step(np.zeros((env.num_agents, 2), np.float32))
+            values.append(float(env.reward_terms[0, col]))
+            states.append(float(env.buffers["term_state"][0, off]))
+    return np.array(values), np.array(states)
+
+
+def test_turn_lane_tables_of_the_hand_built_junction(junction):
+    rec, _, _ = turn_records(junction)
+    kinds = {int(r[7]): (r[6], int(r[8]), list(r[9 : 9 + int(r[8])])) for r in rec}
+    assert kinds == {0: (0.0, 0, []), 1: (0.0, 0, []), 2: (1.0, 1, [0.0]), 3: (1.0, 1, [1.0])}
+    jl = rec[rec[:, 7] == 2][0]  # JL's gate: at 45 degrees round the turn, a lane width long
+    np.testing.assert_allclose(np.hypot(jl[2], jl[3]), 3.5, rtol=1e-9)
+    np.testing.assert_allclose(jl[4:6], [np.cos(np.pi / 4), np.sin(np.pi / 4)], atol=0.06)
+
+
+def test_turn_lane_pays_once_for_turning_from_the_wrong_lane(junction):
+    # right lane, then along JL: the junction lane the right lane does not lead to
+    wrong, state = drive_path(junction, [centre_path(junction, [(-40.0, Y0), (0.0, Y0), 2, 4])])
+    assert wrong.sum() == -1.0 and np.count_nonzero(wrong) == 1
+    assert state[np.flatnonzero(wrong)[0] - 1] == 2.0 and state[-1] == 0.0  # lane 1 on record, then cleared
+    for legal in ([(-40.0, Y1), 0, 2, 4], [(-40.0, Y0), 1, 3, 5]):  # left lane + JL, right lane + JS
+        values, state = drive_path(junction, [centre_path(junction, legal)])
+        assert values.sum() == 0.0 and state.max() > 0.0 and state[-1] == 0.0
+    # change right -> left before the entry gate, then JL: the left lane is on record
+    changed, state = drive_path(
+        junction, [centre_path(junction, [(-40.0, Y0), (-25.0, Y0), (-12.0, Y1), 0, 2, 4])]
+    )
+    assert changed.sum() == 0.0 and state.max() == 1.0 and state[-1] == 0.0
+
+
+def test_turn_lane_decides_once_per_passage_and_forgets_at_spawn(junction):
+    """Two junction passages in a row: the record is cleared by the first decision (else the
+    second, which starts inside the junction with no entry, would pay for lane 0 -> JS), and
+    by the world's restart (else the left-lane entry would make JS pay)."""
+    inside_js = centre_path(junction, [(4.0, Y0), 3, 5])
+    values, _ = drive_path(junction, [centre_path(junction, [(-40.0, Y1), 0, 2]), inside_js])
+    assert values.sum() == 0.0
+    entered = centre_path(junction, [(-40.0, Y1), (8.0, Y1)])  # entered from lane 0, no check yet
+    values, state = drive_path(junction, [entered, inside_js], reset_before=(1,))
+    assert state[len(entered) - 2] == 1.0 and values.sum() == 0.0
+    # the control: without the restart the same drive pays
+    values, _ = drive_path(junction, [entered, inside_js])
+    assert values.sum() == -1.0
+
+
+def test_hydra_builds_and_steps_turn_lane_on_the_bundled_town():
+    from selfplaydrive.builder import build_env, compose
+
+    env = build_env(compose("sim", ["+reward.terms.turn_lane=1.0"]), maps=[load_map("default")], num_worlds=2)
+    assert env.term_names[-1] == "turn_lane" and env.reward.term_state_dim == 1
+    env.reset(0)
+    for _ in range(5):
+        env.step(np.zeros((env.num_agents, 2), np.int64))
+    assert np.isfinite(env.reward_terms).all()
