@@ -1,14 +1,16 @@
-"""Cost of the rule reward terms of issue #15 (docs/benchmarks.md "Rule reward terms").
+"""Cost of the rule reward terms of issues #15 and #16 (docs/benchmarks.md "Rule reward terms").
 
 Two envs on the bundled town, stepped with the same random actions (rewards do not change the
 dynamics, so both follow the same trajectories): the paper configuration and the paper's
-eight terms plus red_intersection, stop_sign, crosswalk_yield and wrong_way. Rounds alternate
+eight terms plus the rule terms (`RULES`). Rounds alternate
 between the two so that drift of a shared machine hits both alike. Reported per agent-step
 (medians of per-step times within a round, then the median over rounds): the whole step
 (`profile=False`) and the reward stage alone (a second pair of envs with `profile=True`).
+``--each`` measures each rule term alone against the paper's terms (``--only NAME``: that one).
 
 Usage:
     python benchmarks/bench_rules.py [--worlds 8] [--steps 200] [--rounds 5] [--threads 1] [--json]
+    python benchmarks/bench_rules.py --each [--only turn_lane] [--worlds 8] [--steps 200] [--rounds 5]
 """
 
 from __future__ import annotations
@@ -29,11 +31,11 @@ from selfplaydrive.rewards import TERM_NAMES, LinearReward
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim.vec_env import VecEnv
 
-RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way")
+RULES = ("red_intersection", "stop_sign", "crosswalk_yield", "wrong_way", "turn_lane")
 
 
 def make(road_map, rules: bool | str, worlds: int, threads: int, profile: bool) -> VecEnv:
-    """The paper's terms, plus all four rule terms (True) or one of them (its name)."""
+    """The paper's terms, plus all rule terms (True) or one of them (its name)."""
     extra = RULES if rules is True else (rules,) if rules else ()
     weights = {n: 1.0 for n in TERM_NAMES} | {n: 1.0 for n in extra}
     env = VecEnv(
@@ -70,6 +72,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--each", action="store_true", help="reward stage of each rule term alone")
+    ap.add_argument("--only", choices=RULES, help="with --each: this rule term only")
     args = ap.parse_args()
     town = load_map("default")
     if args.each:
@@ -113,27 +116,36 @@ def main() -> None:
     for k, v in med.items():
         print(f"  {k:14s} {v:8.3f}")
     print(f"  whole step with the rule terms / paper: {out['step_ratio']:.3f}")
-    print(f"  reward stage: +{out['rules_reward_extra_us']:.3f} us per agent-step for the four rule terms")
+    print(
+        f"  reward stage: +{out['rules_reward_extra_us']:.3f} us per agent-step "
+        f"for the {len(RULES)} rule terms"
+    )
 
 
 def each(town, args: argparse.Namespace) -> None:
-    """Reward stage per agent-step of the paper's terms plus one rule term, for each (rotated
-    order per round), and the extra cost over the paper's terms alone."""
-    variants: list[bool | str] = [False, *RULES]
+    """Reward stage and whole step (profiled envs) per agent-step of the paper's terms plus one
+    rule term, for each (rotated order per round), and the extra cost over the paper's terms."""
+    rules = (args.only,) if args.only else RULES
+    variants: list[bool | str] = [False, *rules]
     envs = {v: make(town, v, args.worlds, args.threads, True) for v in variants}
     rng = np.random.default_rng(0)
     n = envs[False].num_agents
-    res: dict[bool | str, list[float]] = {v: [] for v in variants}
+    res: dict[bool | str, list[tuple[float, float]]] = {v: [] for v in variants}
     for r in range(args.rounds):
         acts = [np.stack([rng.integers(0, 7, n), rng.integers(0, 13, n)], axis=1) for _ in range(args.steps)]
         for v in variants[r % len(variants) :] + variants[: r % len(variants)]:
-            res[v].append(run(envs[v], acts)[1])
-    base = statistics.median(res[False])
-    print(f"reward stage [us per agent-step], {args.worlds} worlds, medians of {args.rounds} rounds:")
-    print(f"  paper terms        {base:.4f}")
-    for v in RULES:
-        m = statistics.median(res[v])
-        print(f"  + {v:16s} {m:.4f}  (+{m - base:.4f})")
+            res[v].append(run(envs[v], acts))
+    step = {v: statistics.median(t[0] for t in res[v]) for v in variants}
+    stage = {v: statistics.median(t[1] for t in res[v]) for v in variants}
+    print(
+        f"[us per agent-step], {args.worlds} worlds x {envs[False].agents_per_world} agents, "
+        f"medians of {args.rounds} rounds x {args.steps} steps (profiled envs):"
+    )
+    print(f"  {'terms':18s} {'reward stage':>12s} {'whole step':>10s} {'agent-steps/s':>13s}")
+    for v in variants:
+        label = f"+ {v}" if v else "paper terms"
+        extra = f"  (stage +{stage[v] - stage[False]:.4f}, step x{step[v] / step[False]:.3f})" if v else ""
+        print(f"  {label:18s} {stage[v]:12.4f} {step[v]:10.4f} {1e6 / step[v]:13.0f}{extra}")
 
 
 if __name__ == "__main__":

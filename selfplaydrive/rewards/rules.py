@@ -306,5 +306,6 @@ RULE_TERMS = (
         turn_records,
         state_dim=1,
         doc="R = -1 on driving through a junction lane the lane entered from does not lead to",
+        grid=(5.0, REACH),
     ),
 )
