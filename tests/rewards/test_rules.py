@@ -506,6 +506,18 @@ def test_turn_lane_decides_once_per_passage_and_forgets_at_spawn(junction):
     assert values.sum() == -1.0
 
 
+def test_turn_lane_refuses_more_entry_lanes_than_packed():
+    ys = 3.5 * np.arange(5)
+    lanes = [LaneElement(np.array([[-30.0, y], [0.0, y]]), 3.5, 14.0, successors=[5]) for y in ys]
+    lanes.append(LaneElement(np.array([[0.0, 0.0], [20.0, 0.0]]), 3.5, 14.0, in_junction=True))
+    fan_in = compile_map(MapElements(name="fan_in", source="tests/rewards/test_rules.py", lanes=lanes))
+    with pytest.raises(ConfigError, match="junction lane 5 .* 5 entry lanes.*TURN_PREDECESSORS = 4"):
+        LinearReward({"turn_lane": 1.0}).bind([fan_in])
+    four = [LaneElement(ln.centerline, 3.5, 14.0, successors=[4]) for ln in lanes[:4]] + [lanes[5]]
+    rec = turn_records(compile_map(MapElements(name="four", source="t", lanes=four)))[0]
+    assert rec[-1, 6:].tolist() == [1.0, 4.0, 4.0, 0.0, 1.0, 2.0, 3.0] and len(rec) == 5
+
+
 def test_hydra_builds_and_steps_turn_lane_on_the_bundled_town():
     from selfplaydrive.builder import build_env, compose
 
