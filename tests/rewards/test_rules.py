@@ -511,7 +511,7 @@ def test_turn_lane_refuses_more_entry_lanes_than_packed():
     lanes = [LaneElement(np.array([[-30.0, y], [0.0, y]]), 3.5, 14.0, successors=[5]) for y in ys]
     lanes.append(LaneElement(np.array([[0.0, 0.0], [20.0, 0.0]]), 3.5, 14.0, in_junction=True))
     fan_in = compile_map(MapElements(name="fan_in", source="tests/rewards/test_rules.py", lanes=lanes))
-    with pytest.raises(ConfigError, match="junction lane 5 .* 5 entry lanes.*TURN_PREDECESSORS = 4"):
+    with pytest.raises(ConfigError, match=r"junction lane 5 .* 5 entry lanes.*TURN_PREDECESSORS = 4"):
         LinearReward({"turn_lane": 1.0}).bind([fan_in])
     four = [LaneElement(ln.centerline, 3.5, 14.0, successors=[4]) for ln in lanes[:4]] + [lanes[5]]
     rec = turn_records(compile_map(MapElements(name="four", source="t", lanes=four)))[0]
