@@ -301,20 +301,21 @@ def test_packing_refuses_tables_beyond_exact_float32_indices():
 
 
 # -- the red-light suite's scripted drivers -------------------------------------------------
-def _suite_sums(town, items, plan):
-    """Outcomes of `plan` on red-light scenarios and each episode's red_intersection sum."""
-    from selfplaydrive.eval.suites import RedLightSuite, run_suite, scripted
+def _suite_sums(town, items, plan_fn, suite, term="red_intersection"):
+    """Classifications of the scripted driver `plan_fn` on suite scenarios and each episode's
+    sum of `term`."""
+    from selfplaydrive.eval.suites import run_suite, scripted
 
     envs = []
 
     def make(spawner, n):
-        envs.append(VecEnv(town, spawner, n, actions=ContinuousActions(), reward=reward("red_intersection")))
+        envs.append(VecEnv(town, spawner, n, actions=ContinuousActions(), reward=reward(term)))
         return envs[-1]
 
-    trajs = run_suite(make, scripted.ScriptedDriver.factory(scripted.red_light_plans(plan)), items)
-    outcomes = [RedLightSuite().classify(i, t)["outcome"] for i, t in zip(items, trajs, strict=True)]
-    stats = {rec["world"]: rec["terms"]["red_intersection"] for rec in envs[0].pop_episode_stats()}
-    return outcomes, [stats[w] for w in range(len(items))]
+    trajs = run_suite(make, scripted.ScriptedDriver.factory(plan_fn), items)
+    classes = [suite.classify(i, t) for i, t in zip(items, trajs, strict=True)]
+    stats = {rec["world"]: rec["terms"][term] for rec in envs[0].pop_episode_stats()}
+    return classes, [stats[w] for w in range(len(items))]
 
 
 def test_bypass_through_the_oncoming_lane_pays_and_the_compliant_driver_does_not():
@@ -326,11 +327,32 @@ def test_bypass_through_the_oncoming_lane_pays_and_the_compliant_driver_does_not
     items = RedLightSuite().generate(town, np.random.default_rng(4), 6)
     around = [it for it in items if it.info["oncoming_offset_m"] is not None]
     assert len(around) >= 3
-    outcomes, sums = _suite_sums(town, around, "bypass")
-    assert outcomes == ["bypassed"] * len(around)
+    from selfplaydrive.eval.suites.scripted import red_light_plans
+
+    classes, sums = _suite_sums(town, around, red_light_plans("bypass"), RedLightSuite())
+    assert [c["outcome"] for c in classes] == ["bypassed"] * len(around)
     assert all(s < 0 for s in sums), sums
-    outcomes, sums = _suite_sums(town, items, "comply")
-    assert outcomes == ["stopped"] * len(items) and sums == [0.0] * len(items)
+    classes, sums = _suite_sums(town, items, red_light_plans("comply"), RedLightSuite())
+    assert [c["outcome"] for c in classes] == ["stopped"] * len(items) and sums == [0.0] * len(items)
+
+
+def test_turn_lane_on_the_turn_lane_suite_s_scripted_drivers():
+    """Paper 5.3 on the bundled town: changing to the correct lane early pays nothing; turning
+    from the lane next to it pays -1 once. From two lanes over, the scripted curve can pass
+    between the junction lanes' mid gates and pay nothing (docs/rewards.md "Limits")."""
+    from selfplaydrive.eval.suites import TurnLaneSuite
+    from selfplaydrive.eval.suites.scripted import turn_early_change, turn_from_wrong_lane
+
+    town = load_map("default")
+    suite = TurnLaneSuite()
+    items = suite.generate(town, np.random.default_rng(0), 8)
+    classes, sums = _suite_sums(town, items, turn_early_change, suite, "turn_lane")
+    assert [c["outcome"] for c in classes] == ["correct_lane"] * len(items) and sums == [0.0] * len(items)
+    classes, sums = _suite_sums(town, items, turn_from_wrong_lane, suite, "turn_lane")
+    assert [c["outcome"] for c in classes] == ["wrong_lane"] * len(items)
+    next_lane = [s for c, s in zip(classes, sums, strict=True) if c["entry_offset_m"] < 5.0]
+    assert len(next_lane) >= 3 and next_lane == [-1.0] * len(next_lane), sums
+    assert set(sums) <= {0.0, -1.0} and sums.count(-1.0) >= 5, sums
 
 
 def test_rule_terms_pass_the_reward_term_checker():
