@@ -199,8 +199,7 @@ def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     vehicle = np.asarray(lanes.kind) != int(LaneKind.BICYCLE)
     junction = np.asarray(lanes.in_junction, bool) & vehicle
     rows = []
-    for i in np.flatnonzero(vehicle):
-        i = int(i)
+    for i in map(int, np.flatnonzero(vehicle)):
         if junction[i]:
             preds = [int(p) for p in lanes.predecessors(i) if vehicle[p] and not junction[p]]
             if len(preds) > TURN_PREDECESSORS:
