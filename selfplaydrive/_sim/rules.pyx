@@ -154,19 +154,23 @@ cdef void term_red_intersection(const Sim* sim, const Params* prm, const Atlas* 
 
 
 # ---- stop_sign -------------------------------------------------------------------------------
-cdef inline bint crosses_line(const float* s, float px, float py, float qx, float qy) noexcept nogil:
-    """The move p -> q goes from the approach side of line segment s = (ax, ay, ex, ey, nx, ny)
-    (start, direction b - a, unit normal pointing along the lane) to the far side, through it."""
+cdef inline int crossing(const float* s, float px, float py, float qx, float qy) noexcept nogil:
+    """+1 if the move p -> q goes from the approach side of line segment s = (ax, ay, ex, ey,
+    nx, ny) (start, direction b - a, unit normal pointing along the lane) to the far side (on
+    the line counts as far) through the segment, -1 if it goes through it the other way, else 0.
+    stop_sign takes +1; turn_lane's gates use the same layout."""
     cdef float sp = (px - s[0]) * s[4] + (py - s[1]) * s[5]
     cdef float sq = (qx - s[0]) * s[4] + (qy - s[1]) * s[5]
     cdef float f, cx, cy, t
-    if not (sp < 0.0 and sq >= 0.0):
-        return False
+    if (sp < 0.0) == (sq < 0.0):
+        return 0
     f = sp / (sp - sq)
     cx = px + f * (qx - px)
     cy = py + f * (qy - py)
     t = ((cx - s[0]) * s[2] + (cy - s[1]) * s[3]) / (s[2] * s[2] + s[3] * s[3])
-    return 0.0 <= t <= 1.0
+    if not (0.0 <= t <= 1.0):
+        return 0
+    return 1 if sp < 0.0 else -1
 
 
 cdef void term_stop_sign(const Sim* sim, const Params* prm, const Atlas* atlas, const float* args,
@@ -189,7 +193,7 @@ cdef void term_stop_sign(const Sim* sim, const Params* prm, const Atlas* atlas, 
         crossed = False
         if map_cell(args, 2, sim.map_id[w], sim.x[i], sim.y[i], &c):
             for j in range(c.n):
-                if crosses_line(record(&c, j), sim.px[i], sim.py[i], sim.x[i], sim.y[i]):
+                if crossing(record(&c, j), sim.px[i], sim.py[i], sim.x[i], sim.y[i]) > 0:
                     crossed = True
                     break
         ok = sim.speed[i] <= vs or (s > 0.0 and s - 1.0 <= dist + 0.5 * sim.length[i])
@@ -364,23 +368,6 @@ cdef enum:
     T_PREDS = 9
 
 
-cdef inline int crosses_gate(const float* g, float px, float py, float qx, float qy) noexcept nogil:
-    """+1 if the move p -> q crosses gate g = (ax, ay, ex, ey, ux, uy, ..) along u (from
-    before the gate's line to on or beyond it), -1 if against u, 0 if it misses the gate."""
-    cdef float sp = (px - g[0]) * g[4] + (py - g[1]) * g[5]
-    cdef float sq = (qx - g[0]) * g[4] + (qy - g[1]) * g[5]
-    cdef float f, cx, cy, t
-    if (sp < 0.0) == (sq < 0.0):
-        return 0
-    f = sp / (sp - sq)
-    cx = px + f * (qx - px)
-    cy = py + f * (qy - py)
-    t = ((cx - g[0]) * g[2] + (cy - g[1]) * g[3]) / (g[2] * g[2] + g[3] * g[3])
-    if not (0.0 <= t <= 1.0):
-        return 0
-    return 1 if sp < 0.0 else -1
-
-
 cdef inline bint leads_from(const float* g, int entry) noexcept nogil:
     """Check gate g's junction lane is a successor of lane `entry`."""
     cdef int k
@@ -416,7 +403,7 @@ cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, 
         e = -1
         for j in range(c.n):
             g = record(&c, j)
-            if g[T_KIND] == 0.0 and (e < 0 or <int>g[T_LANE] < e) and crosses_gate(g, px, py, qx, qy) > 0:
+            if g[T_KIND] == 0.0 and (e < 0 or <int>g[T_LANE] < e) and crossing(g, px, py, qx, qy) > 0:
                 e = <int>g[T_LANE]
         s = e + 1 if e >= 0 else <int>st[0]
         if s == 0:  # nothing on record: a check gate would decide nothing
@@ -427,7 +414,7 @@ cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, 
             g = record(&c, j)
             if g[T_KIND] == 0.0 or sim.hcos[i] * g[4] + sim.hsin[i] * g[5] < cmax:
                 continue
-            if crosses_gate(g, px, py, qx, qy) != 0:
+            if crossing(g, px, py, qx, qy) != 0:
                 crossed = True
                 if leads_from(g, s - 1):
                     legal = True

@@ -167,13 +167,8 @@ def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     for i in range(len(lanes)):
         if int(lanes.kind[i]) == int(LaneKind.BICYCLE):
             continue
-        p = lanes.centerlines[i].astype(np.float64)
-        d = np.diff(p, axis=0)
-        ln = np.hypot(d[:, 0], d[:, 1])
-        ok = ln > 1e-6
-        u = d[ok] / ln[ok, None]
-        hw = np.full(int(ok.sum()), 0.5 * float(lanes.width[i]))
-        rows.append(np.column_stack([p[:-1][ok], u, ln[ok], hw]))
+        start, u, ln = _pieces(lanes.centerlines[i].astype(np.float64))
+        rows.append(np.column_stack([start, u, ln, np.full(len(ln), 0.5 * float(lanes.width[i]))]))
     rec = np.concatenate(rows) if rows else np.zeros((0, 6))
     b = rec[:, :2] + rec[:, 2:4] * rec[:, 4:5]
     lo = np.minimum(rec[:, :2], b) - rec[:, 5:6]

@@ -116,7 +116,7 @@ def stop_sign(
             if not st.active[i]:
                 continue
             s = F(state[i])
-            crossed = bool(_crosses(s6, st.px[i], st.py[i], st.x[i], st.y[i]).any())
+            crossed = bool((_crossing(s6, st.px[i], st.py[i], st.x[i], st.y[i]) > 0).any())
             # the kernel's `s - 1.0 <= dist + 0.5 * length` is evaluated in double
             ok = st.speed[i] <= vs or (s > 0 and float(s) - 1.0 <= float(dist) + 0.5 * float(st.length[i]))
             out[i] = F(-1.0) if crossed and not ok else F(0.0)
@@ -126,17 +126,6 @@ def stop_sign(
                 dx, dy = st.x[i] - st.px[i], st.y[i] - st.py[i]
                 new[i] = s + np.sqrt(dx * dx + dy * dy, dtype=F)
     return out, new
-
-
-def _crosses(s: np.ndarray, px: F, py: F, qx: F, qy: F) -> np.ndarray:
-    sp = (px - s[:, 0]) * s[:, 4] + (py - s[:, 1]) * s[:, 5]
-    sq = (qx - s[:, 0]) * s[:, 4] + (qy - s[:, 1]) * s[:, 5]
-    side = (sp < 0) & (sq >= 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = sp / (sp - sq)
-        cx, cy = px + f * (qx - px), py + f * (qy - py)
-        t = ((cx - s[:, 0]) * s[:, 2] + (cy - s[:, 1]) * s[:, 3]) / (s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
-    return side & (t >= 0) & (t <= 1)
 
 
 def crosswalk_yield(st: Any, maps: Sequence[RoadMap], params: Sequence[float]) -> np.ndarray:
@@ -249,11 +238,11 @@ def turn_lane(
         for i in range(w * A, (w + 1) * A):
             if not st.active[i]:
                 continue
-            side = _gate_sides(entry, st.px[i], st.py[i], st.x[i], st.y[i])
+            side = _crossing(entry, st.px[i], st.py[i], st.x[i], st.y[i])
             crossed_entries = entry[side > 0, 7]
             s = int(crossed_entries.min()) + 1 if len(crossed_entries) else int(state[i])
             along = st.hcos[i] * check[:, 4] + st.hsin[i] * check[:, 5] >= cmax
-            hit = check[along & (_gate_sides(check, st.px[i], st.py[i], st.x[i], st.y[i]) != 0)]
+            hit = check[along & (_crossing(check, st.px[i], st.py[i], st.x[i], st.y[i]) != 0)]
             if s > 0 and len(hit):
                 legal = (hit[:, 9:] == F(s - 1)) & (np.arange(hit.shape[1] - 9) < hit[:, 8:9])
                 out[i] = F(0.0) if legal.any() else F(-1.0)
@@ -262,8 +251,9 @@ def turn_lane(
     return out, new
 
 
-def _gate_sides(g: np.ndarray, px: F, py: F, qx: F, qy: F) -> np.ndarray:
-    """Per gate: +1 crossed along its lane, -1 against it, 0 missed (rules.pyx crosses_gate)."""
+def _crossing(g: np.ndarray, px: F, py: F, qx: F, qy: F) -> np.ndarray:
+    """Per line segment or gate (ax, ay, ex, ey, nx, ny, ..): +1 crossed along n, -1 against
+    it, 0 missed (rules.pyx `crossing`)."""
     sp = (px - g[:, 0]) * g[:, 4] + (py - g[:, 1]) * g[:, 5]
     sq = (qx - g[:, 0]) * g[:, 4] + (qy - g[:, 1]) * g[:, 5]
     with np.errstate(divide="ignore", invalid="ignore"):
