@@ -117,15 +117,25 @@ def timed_env_step(env) -> list[float]:
 
 def one_update(trainer, env_time: list[float]) -> dict[str, float]:
     """Run one PPO update; its agent-steps, wall and CPU seconds per phase."""
+    import torch
+
+    # device work is asynchronous: wait for it at each phase's end (a no-op on the CPU)
+    sync = torch.cuda.synchronize if trainer.device.type == "cuda" else (lambda: None)
+    sync()
     steps0, env0 = trainer.agent_steps, env_time[0]
     cpu0, t0 = time.process_time(), time.perf_counter()
     trainer.collect()
+    sync()
     t1 = time.perf_counter()
     trainer.compute_advantages()
+    sync()
     t2 = time.perf_counter()
     trainer.update()
     trainer.update_idx += 1
+    sync()
     t3, cpu1 = time.perf_counter(), time.process_time()
+    if trainer.device.type == "cuda":  # hand the update's peak memory to the other worker
+        torch.cuda.empty_cache()
     env_s = env_time[0] - env0
     return {
         "agent_steps": trainer.agent_steps - steps0,
@@ -164,6 +174,8 @@ def worker(overrides: list[str], overlay: str | None) -> None:
     env_time = timed_env_step(trainer.env)
     t0 = time.perf_counter()
     trainer.train(num_updates=1)  # warm-up: allocations, first reset, compiling (trainer.compile)
+    if trainer.device.type == "cuda":  # a second worker starts next on the same GPU
+        torch.cuda.empty_cache()
     info = {
         "warmup_s": time.perf_counter() - t0,
         "model": type(trainer.model).__name__,
@@ -173,6 +185,10 @@ def worker(overrides: list[str], overlay: str | None) -> None:
         "rollout_length": trainer.config.rollout_length,
         "torch_threads": torch.get_num_threads(),
         "env_threads": int(cfg.env.num_threads),
+        "device": str(trainer.device),
+        "gpu": torch.cuda.get_device_name(trainer.device) if trainer.device.type == "cuda" else None,
+        "precision": str(getattr(trainer, "amp_dtype", None) or "fp32"),
+        "staged_uploads": sorted(getattr(trainer._to_device, "failed", {})),
         "trainer_file": sys.modules[type(trainer).__module__].__file__,
     }
     print(json.dumps(info), flush=True)
@@ -358,6 +374,7 @@ def main() -> None:
         help="environment of the baseline worker",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--json-out", metavar="FILE", help="also write the summary as JSON to FILE")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--overlay", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -367,6 +384,8 @@ def main() -> None:
     env = dict(item.split("=", 1) for item in args.baseline_env)
     result = run(args.overrides, args.updates, args.baseline, args.baseline_overrides, env)
     print(json.dumps(result) if args.json else report(result))
+    if args.json_out:
+        Path(args.json_out).write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":

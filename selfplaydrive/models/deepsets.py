@@ -56,8 +56,22 @@ def _lstm_step(lstm: nn.LSTM, x: Tensor, h: Tensor, c: Tensor) -> tuple[Tensor, 
     """One step of the one-layer `lstm` for (B, in) inputs: the fused cell on the same weights.
     `nn.LSTM` goes through oneDNN, which sets up a primitive for every new batch size, and the
     number of acting agents changes every step (docs/benchmarks.md, "Trainer"); the values
-    agree up to float rounding."""
-    return torch.lstm_cell(x, (h, c), lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0)
+    agree up to float rounding. Float32 under autocast too, like `_lstm_sequence`."""
+    with torch.autocast(device_type=x.device.type, enabled=False):
+        return torch.lstm_cell(
+            x.float(), (h, c), lstm.weight_ih_l0, lstm.weight_hh_l0, lstm.bias_ih_l0, lstm.bias_hh_l0
+        )
+
+
+def _lstm_sequence(lstm: nn.LSTM, x: Tensor, h: Tensor, c: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """`lstm` over (T, B, in) inputs from (B, hidden) states: outputs (T, B, hidden), h, c.
+
+    The recurrence runs in float32 even under bf16 autocast (`PPOConfig.precision`): the state
+    carries across a whole rollout, where bf16 rounding would compound, and cuDNN's bf16 RNN
+    support depends on its version; the LSTM is a small share of the model's work."""
+    with torch.autocast(device_type=x.device.type, enabled=False):
+        out, (h1, c1) = lstm(x.float(), (h.unsqueeze(0), c.unsqueeze(0)))
+    return out, h1.squeeze(0), c1.squeeze(0)
 
 
 def _orthogonal(module: nn.Module, gain: float) -> None:
@@ -214,8 +228,7 @@ class DeepSetsModel(nn.Module):
         outs = []
         for lo, hi in pairwise(bounds):
             h, c = reset_state((h, c), starts[lo])
-            out, (h1, c1) = self.lstm(x[lo:hi], (h.unsqueeze(0), c.unsqueeze(0)))
-            h, c = h1.squeeze(0), c1.squeeze(0)
+            out, h, c = _lstm_sequence(self.lstm, x[lo:hi], h, c)
             outs.append(out)
         out = torch.cat(outs, dim=0)
         return self.actor(out), self.critic(out).squeeze(-1), (h, c)
@@ -230,10 +243,10 @@ class DeepSetsModel(nn.Module):
                 f"active: expected {obs.shape[0]} entries like obs, got shape {tuple(active.shape)}"
             )
         rows = torch.nonzero(active.reshape(-1)).flatten()
-        x = obs.new_zeros(obs.shape[0], self.hidden_size)
-        if len(rows):
-            x = x.index_copy(0, rows, self.encode(obs.index_select(0, rows)))
-        return x
+        if not len(rows):
+            return obs.new_zeros(obs.shape[0], self.hidden_size)
+        part = self.encode(obs.index_select(0, rows))  # bf16 under autocast on CUDA
+        return part.new_zeros(obs.shape[0], self.hidden_size).index_copy(0, rows, part)
 
     def _check_state(self, state: State, batch: int) -> None:
         if len(state) != 2 or any(s.shape != (batch, self.lstm_size) for s in state):

@@ -241,8 +241,8 @@ class TransformerModel(nn.Module):
         rows = torch.nonzero(active.reshape(-1)).flatten()
         logits = flat.new_zeros(t_len * b, sum(self.nvec))
         value = flat.new_zeros(t_len * b)
-        if len(rows):
+        if len(rows):  # float32 outputs; the parts are bf16 under autocast on CUDA
             part_logits, part_value, _ = self.forward(flat.index_select(0, rows))
-            logits = logits.index_copy(0, rows, part_logits)
-            value = value.index_copy(0, rows, part_value)
+            logits = logits.index_copy(0, rows, part_logits.float())
+            value = value.index_copy(0, rows, part_value.float())
         return logits.reshape(t_len, b, -1), value.reshape(t_len, b), ()

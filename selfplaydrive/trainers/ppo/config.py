@@ -94,6 +94,10 @@ class PPOConfig:
     """Autocast dtype of forward passes: "fp32", "bf16" (torch.autocast) or "auto" (bf16 on
     cuda, fp32 on cpu). Losses, GAE and storage stay float32."""
 
+    host_register: bool = True
+    """On CUDA, page-lock the env's buffers in place (cudaHostRegister) so that uploads read
+    them directly; false, or where registration fails: copy through pinned staging buffers."""
+
     torch_threads: int = 0
     """torch intra-op threads on the CPU (0 leaves torch's default)."""
 
@@ -153,6 +157,8 @@ class PPOConfig:
                 _bad(name, getattr(self, name), "a finite number >= 0")
         if self.target_kl is not None and not self.target_kl > 0:
             _bad("target_kl", self.target_kl, "None or a number > 0")
+        if not isinstance(self.host_register, bool):
+            _bad("host_register", self.host_register, "true or false")
         if not isinstance(self.compile, bool):
             _bad("compile", self.compile, "true or false")
         if self.precision not in PRECISIONS:

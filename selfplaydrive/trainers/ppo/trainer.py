@@ -31,6 +31,7 @@ from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 from selfplaydrive.trainers.ppo.logging import RunLogger
 from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
+from selfplaydrive.trainers.ppo.uploads import Uploader
 
 with requires_extra("torch"):
     import torch
@@ -161,8 +162,7 @@ class PPOTrainer:
         self.needs_reset = True
         self.state: State = ()
         self.next_start = torch.ones(self.num_slots, dtype=torch.bool, device=self.device)
-        self.pinned = self.device.type == "cuda"
-        self._staging: dict[str, Tensor] = {}
+        self._to_device = Uploader(self.device, config.host_register)  # (array, key) -> Tensor
         self.callbacks = build_callbacks(config.callbacks)
 
     # ---------------------------------------------------------------------------------------
@@ -178,21 +178,6 @@ class PPOTrainer:
         if self.amp_dtype is None:
             return nullcontext()
         return torch.autocast(device_type=self.device.type, dtype=self.amp_dtype)
-
-    def _to_device(self, array: np.ndarray, key: str) -> Tensor:
-        """Copy an env buffer to the device (a private copy: the env overwrites its buffers).
-
-        On CUDA the copy goes through a pinned staging buffer per `key` and is non-blocking;
-        reusing a staging buffer is safe because every env step synchronises once (the action
-        download) after the previous upload from it was queued."""
-        if not self.pinned:
-            return torch.tensor(array, device=self.device)  # a copy (env buffers are read-only)
-        buf = self._staging.get(key)
-        if buf is None or tuple(buf.shape) != array.shape:
-            buf = torch.from_numpy(np.empty_like(array)).pin_memory()
-            self._staging[key] = buf
-        np.copyto(buf.numpy(), array)
-        return buf.to(self.device, non_blocking=True)
 
     def reset_env(self, seed: int) -> None:
         """Reset the env and every slot's recurrent state (a new episode everywhere)."""
@@ -249,14 +234,14 @@ class PPOTrainer:
         term = self._to_device(self.env.terminations, "term") & acted
         trunc = self._to_device(self.env.truncations, "trunc") & acted & ~term
         final_values = torch.zeros_like(rewards)
-        if self.env.truncations.any():
-            idx = torch.nonzero(trunc).flatten()
-            if len(idx):
-                final_obs = self._to_device(self.env.final_observations, "final_obs")[idx]
-                no_start = torch.zeros(len(idx), dtype=torch.bool, device=self.device)
-                with self.autocast():  # the state after step t continues into the final obs
-                    _, v, _ = self.model(final_obs, _index(self.state, idx), no_start)
-                final_values[idx] = v.float()
+        ended = np.flatnonzero(self.env.truncations & acted_np & ~self.env.terminations)
+        if len(ended):  # found on the host: no device sync, and only these rows are uploaded
+            idx = torch.from_numpy(ended).to(self.device)
+            final_obs = torch.from_numpy(self.env.final_observations[ended]).to(self.device)
+            no_start = torch.zeros(len(idx), dtype=torch.bool, device=self.device)
+            with self.autocast():  # the state after step t continues into the final obs
+                _, v, _ = self.model(final_obs, _index(self.state, idx), no_start)
+            final_values[idx] = v.float()
         masks = self._to_device(self.env.masks, "masks")
         self.next_start = masks & (~acted | term | trunc)
         return rewards, term, trunc, final_values
