@@ -1,0 +1,47 @@
+"""benchmarks/learning_curve.py: time to completion thresholds from a run's metrics.jsonl."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def curve():
+    spec = importlib.util.spec_from_file_location("learning_curve", REPO / "benchmarks" / "learning_curve.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def row(step: int, time: float, completion: float) -> dict[str, float]:
+    return {
+        "step": step,
+        "time": time,
+        "charts/slot_sps": 1000.0,
+        "recent/waypoint_completion": completion,
+        "recent/collision_rate": 0.3,
+        "recent/offroad_rate": 0.1,
+    }
+
+
+def test_minutes_to_each_threshold_count_from_the_runs_start(curve, tmp_path):
+    # the first update logged 1,000 slot-steps at 1,000 slot-steps/s: the run started at t = 99 s
+    rows = [row(1000, 100.0, 0.1), row(2000, 159.0, 0.55), row(3000, 219.0, 0.62), row(4000, 279.0, 0.58)]
+    path = tmp_path / "metrics.jsonl"
+    lines = [json.dumps(r) for r in rows] + [json.dumps({"step": 5000, "time": 300.0}), '{"step": 6000, "ti']
+    path.write_text("\n".join(lines), encoding="utf-8")  # a row without completion, a cut last line
+    read = curve.read(path)
+    assert [r["step"] for r in read] == [1000, 2000, 3000, 4000]
+    out = curve.summary(read, [0.5, 0.6, 0.8], points=2)
+    assert out[0] == "completion >= 50%: 1.00 min, 2,000 slot-steps"
+    assert out[1] == "completion >= 60%: 2.00 min, 3,000 slot-steps"
+    assert out[2] == "completion >= 80%: not reached"
+    assert out[3] == "best: 62.0% at 2.00 min"
+    assert len(out) == 4 + 1 + 2  # header and the first and last rows
+    assert curve.summary([], [0.5]) == ["no update with a finished world-episode was logged"]
