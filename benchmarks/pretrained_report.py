@@ -4,7 +4,7 @@
     python benchmarks/pretrained_report.py                        # map=default and map=tartu
     python benchmarks/pretrained_report.py --maps default --eval quick --episodes 4   # a smoke run
     python benchmarks/pretrained_report.py --checkpoint runs/x/checkpoints/final.pt --out /tmp/x
-        # a candidate before shipping it (same env as the shipped policy)
+        # a candidate before shipping it (the shipped env, with its own observation sizes)
 
 Per map:
 
@@ -58,7 +58,8 @@ def completion_eval(
         agents: Agents per world (None: the training run's spawner).
         episodes: World-episodes to finish.
         deterministic: Greedy actions instead of sampled ones.
-        checkpoint: The policy (the shipped one by default); the env is the shipped run's.
+        checkpoint: The policy (the shipped one by default); the env is the shipped run's, with
+            the observation sizes of the checkpoint's own run where its config is found.
         misses: Also break the missed waypoints down by outcome (`eval.misses`) on the same
             world-episodes, in its own rollouts with `policies.make_policy` (same reset seed).
     """
@@ -66,11 +67,14 @@ def completion_eval(
 
     from selfplaydrive import pretrained
     from selfplaydrive.builder import build_env, build_model, compose, instantiate
-    from selfplaydrive.policies import load_checkpoint, load_run_config
+    from selfplaydrive.policies import find_run_config, load_checkpoint, load_run_config
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
 
     cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
+    own = find_run_config(checkpoint)
+    if own is not None:  # a candidate trained with other observation sizes sees its own
+        cfg.obs = load_run_config(own).obs
     cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
     cfg.map = compose("train", [f"map={map_name}"]).map
     cfg.env.num_threads = 1
@@ -276,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--checkpoint",
         default=None,
-        help="evaluate this checkpoint in the shipped policy's env instead of the shipped policy",
+        help="a candidate: the shipped env with the observation sizes of its own run",
     )
     parser.add_argument("--out", default=str(pretrained.FOLDER), help="where report.json and REPORT.md go")
     parser.add_argument("--work", default=None, help="folder for the eval runs (default: a temporary one)")

@@ -350,6 +350,16 @@ def model_from_checkpoint(
     weights = payload.get("model")
     if not isinstance(weights, Mapping) or not weights:
         raise CheckpointError("expected the model's weights under key 'model', found none", path)
+    trained = trained_obs_dim(payload)
+    if trained is not None and trained != env.layout.obs_dim:
+        # Deep Sets' weights do not depend on the set sizes, so they would load into an env with
+        # other max_road / max_objects and drive on features unlike those they learnt from
+        raise CheckpointError(
+            f"trained on observation rows of width {trained}, this env's are {env.layout.obs_dim} "
+            "wide; expected the observation sizes of the run it was trained in (its "
+            "resolved_config.yaml `obs` group)",
+            path,
+        )
     spec = dict(payload.get("model_spec") or _run_config_spec(path) or infer_model_spec(weights))
     target = spec.pop("_target_")
     spec.update(model_kwargs or {})
