@@ -3,6 +3,10 @@ per world on the middle lane, waypoints ahead on its centre, and a tiny policy f
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
 import numpy as np
 import torch
 from torch import nn
@@ -183,3 +187,12 @@ class SpeedValueModel(nn.Module):
     def forward_sequence(self, obs, state=(), episode_start=None):
         lg, v, _ = self.forward(obs.reshape(-1, obs.shape[-1]))
         return lg.reshape(*obs.shape[:2], -1), v.reshape(obs.shape[:2]), ()
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """The script benchmarks/<name>.py as a module (the benchmarks are no package)."""
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

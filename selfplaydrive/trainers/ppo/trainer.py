@@ -207,8 +207,9 @@ class PPOTrainer:
         actions = torch.zeros(self.num_slots, len(self.nvec), dtype=torch.int64, device=self.device)
         logprobs = torch.zeros(self.num_slots, device=self.device)
         values = torch.zeros(self.num_slots, device=self.device)
-        rows = torch.nonzero(acted).flatten()
-        if len(rows):
+        acting = np.flatnonzero(self.env.masks)  # on the host: no wait for the device
+        rows = torch.from_numpy(acting).to(self.device)
+        if len(acting):
             state = _index(self.state, rows)
             with self.autocast():
                 logits, value, state = self.model(obs[rows], state, self.next_start[rows])
