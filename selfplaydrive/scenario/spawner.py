@@ -24,6 +24,8 @@ the same seed gives the same `Scenario`):
    agent (its box grown by `static_gap`, stretched forward by `STATIC_CLEAR_AHEAD` = 5 m plus
    the distance it covers in `STATIC_HEADWAY` = 1 s), each leaving at least
    `min_free_lane_width` of its lane free (`_sim.placement.Placer.statics`).
+   With `turn_lane_starts` > 0 (off in the paper), up to that many driving agents are then
+   moved to turn-lane starts (`scenario.turn_starts.TurnLaneStarts`).
 5. Pedestrians crossing at crosswalks and elsewhere (`PedestrianSampler`).
 6. Traffic lights (`LightSampler`), episode length from `episode_lengths`, per-agent reward
    coefficients (`ConditioningSampler`) and hidden dynamics parameters (`HiddenParamSampler`).
@@ -46,6 +48,7 @@ from selfplaydrive.scenario.index import MapIndex, map_index
 from selfplaydrive.scenario.lights import LightSampler
 from selfplaydrive.scenario.pedestrians import PATH_POINTS, PedestrianSampler
 from selfplaydrive.scenario.placement import sample_region
+from selfplaydrive.scenario.turn_starts import TurnLaneStarts
 from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 
@@ -96,6 +99,10 @@ class PaperSpawner:
         waypoint_spacing: Mean time between waypoints at the speed limit [s] (5).
         waypoint_spacing_jitter: Gaps are spacing * U(1 - j, 1 + j).
         lane_change_prob: Probability of a legal lane change per route step.
+        turn_lane_starts: Driving agents per world moved to a start of the turn-lane suite
+            (`scenario.turn_starts`: on a lane from which the coming turn is not legal, only
+            waypoints after the junction), a training curriculum for section 5.3; 0 = off (the
+            paper's spawner; no extra random draws).
         episode_lengths: Episode lengths [s], drawn uniformly (20, 30, 40).
         sizes: Size sampler of agents (default `VehicleSizeSampler()`).
         static_sizes: Size sampler of static vehicles (default `VehicleSizeSampler()`).
@@ -138,6 +145,7 @@ class PaperSpawner:
         waypoint_spacing: float = 5.0,
         waypoint_spacing_jitter: float = 0.5,
         lane_change_prob: float = 0.1,
+        turn_lane_starts: int = 0,
         episode_lengths: Sequence[float] = (20.0, 30.0, 40.0),
         sizes: VehicleSizeSampler | None = None,
         static_sizes: VehicleSizeSampler | None = None,
@@ -153,6 +161,12 @@ class PaperSpawner:
         _check_int("candidates_per_agent", candidates_per_agent, 1)
         _check_int("first_round_candidates", first_round_candidates, 1)
         _check_int("static_candidates_per_vehicle", static_candidates_per_vehicle, 1)
+        _check_int("turn_lane_starts", turn_lane_starts, 0)
+        if turn_lane_starts and max_waypoints < 2:
+            raise ConfigError(
+                f"PaperSpawner.turn_lane_starts={turn_lane_starts} gives agents two waypoints: "
+                f"max_waypoints must be >= 2, got {max_waypoints}"
+            )
         if not 0.0 <= parked_share <= 1.0:
             raise ConfigError(f"PaperSpawner.parked_share must lie in [0, 1], got {parked_share}")
         for name, v in (
@@ -214,6 +228,12 @@ class PaperSpawner:
         self.hidden = hidden or HiddenParamSampler()
         self.pedestrians = pedestrians or PedestrianSampler()
         self.lights = lights or LightSampler()
+        self.turn_lane_starts = int(turn_lane_starts)
+        self._turn_starts = None
+        if self.turn_lane_starts:
+            self._turn_starts = TurnLaneStarts(
+                self.turn_lane_starts, min_agent_distance=self.min_agent_distance, static_gap=self.static_gap
+            )
         # spawn shortfalls (worlds that got fewer than num_agents agents): the first one per map
         # warns, every one is counted here
         self.shortfalls: dict[str, int] = {}
@@ -259,6 +279,8 @@ class PaperSpawner:
         n = len(lane)
         self._waypoints(sc, index, lane, s, rng)
         veh_xy, veh_r, still = self._statics(sc, index, box, rng, n)
+        if self._turn_starts is not None and self._turn_starts.apply(sc, road_map, rng):
+            veh_xy[:n] = sc.agent_xy[:n]  # the pedestrians keep clear of the moved agents
         peds = self.pedestrians.sample(
             rng, index.crossings, index.crosswalks, box, self.num_pedestrians, veh_xy, veh_r, still
         )

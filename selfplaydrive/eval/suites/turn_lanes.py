@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -47,6 +48,29 @@ from selfplaydrive.scenario.vehicles import DEFAULT_CATEGORIES, VehicleSizeSampl
 
 OUTCOMES = ("correct_lane", "wrong_lane", "no_turn")
 CAR_CATEGORIES = tuple(c for c in DEFAULT_CATEGORIES if c[0] in ("small_car", "car", "suv_van"))
+
+
+@dataclass
+class SiteStarts:
+    """The admissible starts of one turn-lane site (`TurnLaneSuite.site_starts`).
+
+    Attributes:
+        xy: (n, 2) float64 start points on the wrong lane's centerline [m].
+        heading: (n,) float64 lane heading there [rad].
+        d_entry: (n,) float64 distance to the junction's start along the correct corridor [m].
+        corridor: (m, 2) correct approach corridor ending with the junction lane [m].
+        s_entry: Arc length of the junction's start along `corridor` [m].
+        exit_path: (q, 2) exit lanes after the junction [m].
+        exit_waypoints: (2, 2) the waypoints 10 m and 30 m along `exit_path` [m].
+    """
+
+    xy: np.ndarray
+    heading: np.ndarray
+    d_entry: np.ndarray
+    corridor: np.ndarray
+    s_entry: float
+    exit_path: np.ndarray
+    exit_waypoints: np.ndarray
 
 
 class TurnLaneSuite:
@@ -128,8 +152,10 @@ class TurnLaneSuite:
         warn_shortfall(self.name, road_map, len(out), count, f"{len(sites)} candidate sites")
         return out
 
-    def _build(self, geo, j, p, w, rng, sizes, map_index) -> SuiteScenario | None:
-        """One scenario at site (j, p, w), or None when no start point fits."""
+    def site_starts(self, geo: LaneGeometry, j: int, p: int, w: int) -> SiteStarts | None:
+        """Every admissible start of site (j, p, w) on a 1 m grid along W, or None when the
+        site has no exit room or no start fits (the generator draws one of them; the training
+        curriculum `scenario.turn_starts` draws from all sites)."""
         L = geo.lanes
         nonj = lambda i: not L.in_junction[i]  # noqa: E731
         back = geo.chain_back(p, self.search_back, allow=nonj)
@@ -150,10 +176,23 @@ class TurnLaneSuite:
         ok &= (d_entry >= self.start_distance[0]) & (d_entry <= self.start_distance[1])
         if not ok.any():
             return None
-        k = int(rng.choice(np.flatnonzero(ok)))
+        exit_wp, _ = point_at(exit_path, np.array([10.0, min(30.0, cumlen(exit_path)[-1])]))
+        k = np.flatnonzero(ok)
+        return SiteStarts(xy[k], hd[k], d_entry[k], corridor, float(s_entry), exit_path, exit_wp)
+
+    def _build(self, geo, j, p, w, rng, sizes, map_index) -> SuiteScenario | None:
+        """One scenario at site (j, p, w), or None when no start point fits."""
+        L = geo.lanes
+        nonj = lambda i: not L.in_junction[i]  # noqa: E731
+        st = self.site_starts(geo, j, p, w)
+        if st is None:
+            return None
+        k = int(rng.choice(len(st.xy)))
+        xy, hd, d_entry = st.xy, st.heading, st.d_entry
+        corridor, s_entry, exit_path = st.corridor, st.s_entry, st.exit_path
         length, width, _ = sizes.sample(rng, 1)
         v = min(rng.uniform(*self.speed), 0.8 * float(L.speed_limit[w]))
-        wp, _ = point_at(exit_path, np.array([10.0, min(30.0, cumlen(exit_path)[-1])]))
+        wp = st.exit_waypoints
         if self.entry_waypoint is not None:
             if d_entry[k] <= self.entry_waypoint:
                 return None  # the start would already be past the entry waypoint
