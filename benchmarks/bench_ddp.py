@@ -9,7 +9,9 @@ next round: once as `selfplaydrive train` (one process: one torch thread, one en
 `env.num_worlds` worlds) and once as `torchrun --standalone --nproc_per_node=N` with the worlds
 and the slot-step budget split evenly over the N ranks, so both runs collect the same rollout
 per update and the same total. DDP averages the ranks' gradients, so an update of the N ranks
-learns from the same batch as the single process's. Reported per mode: the median over rounds of
+learns from the same batch as the single process's. With `--weak` every rank keeps all the
+worlds instead (the budget is still split): an update of N ranks learns from N times the batch,
+and each rank's update is as large as the single process's. Reported per mode: the median over rounds of
 the median `charts/sps` (active agent-steps per second over whole updates, all ranks) after the
 first `--skip` updates, the wall time of each run, and agent-steps per CPU-second (CPU time of
 the run's processes from `getrusage(RUSAGE_CHILDREN)`, over the whole run, start-up included).
@@ -31,13 +33,14 @@ from typing import Any
 
 
 def run_once(
-    mode: str, ranks: int, worlds: int, slot_steps: int, overrides: list[str], out: Path
+    mode: str, ranks: int, worlds: int, slot_steps: int, overrides: list[str], out: Path, weak: bool = False
 ) -> dict[str, Any]:
-    """One training run; its metrics, wall time and CPU time."""
+    """One training run; its metrics, wall time and CPU time. `weak`: every rank keeps all
+    `worlds` (each update of the ranks learns from `ranks` times the single process's batch)."""
     per = ranks if mode == "ranks" else 1
     args = [
         *overrides,
-        f"env.num_worlds={worlds // per}",
+        f"env.num_worlds={worlds if weak else worlds // per}",
         f"trainer.total_steps={slot_steps // per}",
         "trainer.eval_episodes=0",
         "trainer.progress_bar=false",
@@ -89,10 +92,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worlds", type=int, default=4, help="worlds in all (split over the ranks)")
     parser.add_argument("--slot-steps", type=int, default=600_000, help="budget of each run, in all")
     parser.add_argument("--skip", type=int, default=2, help="updates left out of the sps median")
+    parser.add_argument(
+        "--weak",
+        action="store_true",
+        help="every rank keeps all --worlds (N times the batch per update; the budget is still split)",
+    )
     parser.add_argument("--json", action="store_true")
     parser.add_argument("overrides", nargs="*")
     args = parser.parse_args(argv)
-    if args.worlds % args.ranks:
+    if args.worlds % args.ranks and not args.weak:
         parser.error(f"--worlds {args.worlds} is not a multiple of --ranks {args.ranks}")
     results: dict[str, list[dict[str, float]]] = {"single": [], "ranks": []}
     with tempfile.TemporaryDirectory(prefix="bench_ddp_") as tmp:
@@ -100,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
             order = ("single", "ranks") if i % 2 == 0 else ("ranks", "single")
             for mode in order:
                 out = Path(tmp) / f"{mode}_{i}"
-                run = run_once(mode, args.ranks, args.worlds, args.slot_steps, args.overrides, out)
+                run = run_once(mode, args.ranks, args.worlds, args.slot_steps, args.overrides, out, args.weak)
                 res = summarize(run, args.skip)
                 res["load_1min"] = os.getloadavg()[0]
                 results[mode].append(res)
@@ -111,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     report = {
         "command": "python benchmarks/bench_ddp.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "ranks": args.ranks,
+        "weak": args.weak,
         "median": med,
         "ratio_of_medians": med["ranks"]["sps_median"] / med["single"]["sps_median"],
         "median_round_ratio": statistics.median(ratios),

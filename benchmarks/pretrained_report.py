@@ -12,7 +12,8 @@ Per map:
    coefficients of conf/reward/eval.yaml, every penalty at its maximum): the trainer's own
    `evaluate` on `--episodes` fresh world-episodes (seed + `EVAL_SEED_OFFSET`, as the final
    evaluation of `selfplaydrive train`), with the run's spawner (its agents per world) and with
-   the paper's 32 agents per world, sampled and greedy actions. Completion is reached waypoints
+   the paper's 32 agents per world, sampled and greedy actions (turn-lane starts, a training
+   curriculum of `PaperSpawner`, are switched off: the paper's spawner). Completion is reached waypoints
    over assigned ones; the collision and road-edge rates are the share of agents with at least
    one such contact.
    For the run's spawner and greedy actions, `selfplaydrive.eval.misses` also charges every
@@ -80,6 +81,8 @@ def completion_eval(
     cfg.env.num_threads = 1
     if agents is not None:
         cfg.spawner.num_agents = int(agents)
+    if "turn_lane_starts" in cfg.spawner:  # a training curriculum, not the evaluation protocol
+        cfg.spawner.turn_lane_starts = 0
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
     model = build_model(cfg, env)

@@ -25,7 +25,8 @@ the same seed gives the same `Scenario`):
    the distance it covers in `STATIC_HEADWAY` = 1 s), each leaving at least
    `min_free_lane_width` of its lane free (`_sim.placement.Placer.statics`).
    With `turn_lane_starts` > 0 (off in the paper), up to that many driving agents are then
-   moved to turn-lane starts (`scenario.turn_starts.TurnLaneStarts`).
+   moved to turn-lane starts (`scenario.turn_starts.TurnLaneStarts`); with `turn_lane_worlds`
+   > 0 that share of worlds holds turn-lane starts only.
 5. Pedestrians crossing at crosswalks and elsewhere (`PedestrianSampler`).
 6. Traffic lights (`LightSampler`), episode length from `episode_lengths`, per-agent reward
    coefficients (`ConditioningSampler`) and hidden dynamics parameters (`HiddenParamSampler`).
@@ -103,6 +104,8 @@ class PaperSpawner:
             (`scenario.turn_starts`: on a lane from which the coming turn is not legal, only
             waypoints after the junction), a training curriculum for section 5.3; 0 = off (the
             paper's spawner; no extra random draws).
+        turn_lane_worlds: Probability that a world holds turn-lane starts only: every agent is
+            moved to one or removed (`TurnLaneStarts.apply(clear=True)`); 0 = off (no draw).
         episode_lengths: Episode lengths [s], drawn uniformly (20, 30, 40).
         sizes: Size sampler of agents (default `VehicleSizeSampler()`).
         static_sizes: Size sampler of static vehicles (default `VehicleSizeSampler()`).
@@ -146,6 +149,7 @@ class PaperSpawner:
         waypoint_spacing_jitter: float = 0.5,
         lane_change_prob: float = 0.1,
         turn_lane_starts: int = 0,
+        turn_lane_worlds: float = 0.0,
         episode_lengths: Sequence[float] = (20.0, 30.0, 40.0),
         sizes: VehicleSizeSampler | None = None,
         static_sizes: VehicleSizeSampler | None = None,
@@ -162,10 +166,12 @@ class PaperSpawner:
         _check_int("first_round_candidates", first_round_candidates, 1)
         _check_int("static_candidates_per_vehicle", static_candidates_per_vehicle, 1)
         _check_int("turn_lane_starts", turn_lane_starts, 0)
-        if turn_lane_starts and max_waypoints < 2:
+        if not 0.0 <= turn_lane_worlds <= 1.0:
+            raise ConfigError(f"PaperSpawner.turn_lane_worlds must lie in [0, 1], got {turn_lane_worlds}")
+        if (turn_lane_starts or turn_lane_worlds) and max_waypoints < 2:
             raise ConfigError(
-                f"PaperSpawner.turn_lane_starts={turn_lane_starts} gives agents two waypoints: "
-                f"max_waypoints must be >= 2, got {max_waypoints}"
+                f"PaperSpawner.turn_lane_starts={turn_lane_starts} / turn_lane_worlds={turn_lane_worlds} "
+                f"give agents two waypoints: max_waypoints must be >= 2, got {max_waypoints}"
             )
         if not 0.0 <= parked_share <= 1.0:
             raise ConfigError(f"PaperSpawner.parked_share must lie in [0, 1], got {parked_share}")
@@ -228,11 +234,11 @@ class PaperSpawner:
         self.hidden = hidden or HiddenParamSampler()
         self.pedestrians = pedestrians or PedestrianSampler()
         self.lights = lights or LightSampler()
-        self.turn_lane_starts = int(turn_lane_starts)
+        self.turn_lane_starts, self.turn_lane_worlds = int(turn_lane_starts), float(turn_lane_worlds)
         self._turn_starts = None
-        if self.turn_lane_starts:
+        if self.turn_lane_starts or self.turn_lane_worlds:
             self._turn_starts = TurnLaneStarts(
-                self.turn_lane_starts, min_agent_distance=self.min_agent_distance, static_gap=self.static_gap
+                min_agent_distance=self.min_agent_distance, static_gap=self.static_gap
             )
         # spawn shortfalls (worlds that got fewer than num_agents agents): the first one per map
         # warns, every one is counted here
@@ -279,7 +285,7 @@ class PaperSpawner:
         n = len(lane)
         self._waypoints(sc, index, lane, s, rng)
         veh_xy, veh_r, still = self._statics(sc, index, box, rng, n)
-        if self._turn_starts is not None and self._turn_starts.apply(sc, road_map, rng):
+        if self._turn_starts is not None and self._move_to_turn_starts(sc, road_map, rng):
             veh_xy[:n] = sc.agent_xy[:n]  # the pedestrians keep clear of the moved agents
         peds = self.pedestrians.sample(
             rng, index.crossings, index.crosswalks, box, self.num_pedestrians, veh_xy, veh_r, still
@@ -293,6 +299,14 @@ class PaperSpawner:
         sc.coeffs[:n] = self.conditioning.sample(rng, n)
         sc.hidden[:n] = self.hidden.sample(rng, n)
         return sc
+
+    def _move_to_turn_starts(self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator) -> int:
+        """Turn-lane starts (`scenario.turn_starts`): a whole turn-lane world with probability
+        `turn_lane_worlds` (one draw, only when it is > 0), else `turn_lane_starts` agents."""
+        assert self._turn_starts is not None
+        if self.turn_lane_worlds > 0 and rng.random() < self.turn_lane_worlds:
+            return self._turn_starts.apply(sc, road_map, rng, self.num_agents, clear=True)
+        return self._turn_starts.apply(sc, road_map, rng, self.turn_lane_starts)
 
     # -- agents ---------------------------------------------------------------------------------
 

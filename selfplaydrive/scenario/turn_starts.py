@@ -25,6 +25,9 @@ from selfplaydrive.scenario.types import Scenario
 
 # tries per placed agent: random starts inside the region checked against the other bodies
 TRIES_PER_AGENT = 16
+# per-agent fields of `Scenario` that a move or a removal writes (the first three are not zeroed)
+AGENT_FIELDS = ("agent_valid", "agent_parked", "agent_lane", "agent_xy", "agent_heading", "agent_speed",
+                "agent_length", "agent_width", "waypoints", "num_waypoints", "coeffs", "hidden")  # fmt: skip
 # a start keeps this far inside the region's edge [m], so its junction is usually inside too
 REGION_MARGIN = 20.0
 
@@ -79,7 +82,7 @@ def start_table(road_map: RoadMap, suite=None) -> StartTable:
 
 
 class TurnLaneStarts:
-    """Moves up to `count` driving agents of a sampled world to turn-lane starts.
+    """Moves up to `count` driving agents of a sampled world to turn-lane starts (`apply`).
 
     A moved agent keeps its slot, size, reward coefficients and hidden parameters; it gets a
     start row of `start_table` inside the world's region, a speed U(`speed`) capped by 0.8 x
@@ -89,7 +92,6 @@ class TurnLaneStarts:
     moved when no start fits (no warning: the world is still a normal one).
 
     Args:
-        count: Agents to move per world (0: off).
         speed: (low, high) initial speed [m/s] (the suite's U(5, 8)).
         min_agent_distance: Minimum distance between agent centres [m].
         static_gap: Clearance between bounding circles of a moved agent and static vehicles [m].
@@ -97,12 +99,10 @@ class TurnLaneStarts:
 
     def __init__(
         self,
-        count: int,
         speed: tuple[float, float] = (5.0, 8.0),
         min_agent_distance: float = 15.0,
         static_gap: float = 1.0,
     ) -> None:
-        self.count = int(count)
         self.speed = (float(speed[0]), float(speed[1]))
         self.min_agent_distance = float(min_agent_distance)
         self.static_gap = float(static_gap)
@@ -117,20 +117,30 @@ class TurnLaneStarts:
         self._last = (weakref.ref(road_map), table)
         return table
 
-    def apply(self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator) -> int:
-        """Move agents of `sc` in place; returns how many were moved.
+    def apply(
+        self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator, count: int, clear: bool = False
+    ) -> int:
+        """Move up to `count` agents of `sc` in place; returns how many were moved.
 
         Draws, in order: a permutation of the driving agents' slots, then per placed agent up
         to `TRIES_PER_AGENT` start rows and one speed (all from `rng`).
+
+        Args:
+            clear: Make the world a turn-lane world: every agent (parked ones too) is a
+                candidate, agents are placed one after another keeping their distance from
+                the ones placed before, and the agents that find no start are removed (their
+                slots made invalid), so the world holds turn-lane starts only.
         """
+        if clear:
+            return self._clear(sc, road_map, rng, count)
         table = self.table(road_map)
         lo = sc.region[:2].astype(np.float64) + REGION_MARGIN
         hi = sc.region[2:].astype(np.float64) - REGION_MARGIN
         inside = np.flatnonzero(np.all((table.xy > lo) & (table.xy < hi), axis=1))
         slots = np.flatnonzero(sc.agent_valid & ~sc.agent_parked)
-        if self.count <= 0 or len(inside) == 0 or len(slots) == 0:
+        if count <= 0 or len(inside) == 0 or len(slots) == 0:
             return 0
-        slots = slots[rng.permutation(len(slots))][: self.count]
+        slots = slots[rng.permutation(len(slots))][:count]
         static_xy = sc.static_xy[sc.static_valid].astype(np.float64)
         static_r = 0.5 * np.hypot(sc.static_length[sc.static_valid], sc.static_width[sc.static_valid])
         moved = 0
@@ -140,6 +150,35 @@ class TurnLaneStarts:
                 continue
             self._move(sc, int(slot), table, row, rng)
             moved += 1
+        return moved
+
+    def _clear(self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator, count: int) -> int:
+        """`apply(clear=True)`: all agents to turn-lane starts or out of the world."""
+        table = self.table(road_map)
+        lo = sc.region[:2].astype(np.float64) + REGION_MARGIN
+        hi = sc.region[2:].astype(np.float64) - REGION_MARGIN
+        inside = np.flatnonzero(np.all((table.xy > lo) & (table.xy < hi), axis=1))
+        slots = np.flatnonzero(sc.agent_valid)
+        if len(inside) == 0 or len(slots) == 0:
+            return 0
+        slots = slots[rng.permutation(len(slots))]
+        static_xy = sc.static_xy[sc.static_valid].astype(np.float64)
+        static_r = 0.5 * np.hypot(sc.static_length[sc.static_valid], sc.static_width[sc.static_valid])
+        saved = {name: getattr(sc, name).copy() for name in AGENT_FIELDS}
+        sc.agent_valid[slots] = False  # placed back one by one
+        moved = 0
+        for slot in slots[:count]:
+            row = self._fit(sc, int(slot), table, inside, static_xy, static_r, rng)
+            if row < 0:
+                continue
+            self._move(sc, int(slot), table, row, rng)
+            sc.agent_valid[slot] = True
+            moved += 1
+        if moved == 0:  # not one start fits: the world stays a normal one
+            for name, value in saved.items():
+                getattr(sc, name)[...] = value
+            return 0
+        _blank_agents(sc, np.flatnonzero(~sc.agent_valid))
         return moved
 
     def _fit(self, sc, slot, table, inside, static_xy, static_r, rng) -> int:
@@ -167,3 +206,11 @@ class TurnLaneStarts:
         sc.waypoints[slot, :2] = table.waypoints[row]
         sc.waypoints[slot, 2:] = table.waypoints[row, 1]
         sc.num_waypoints[slot] = 2
+
+
+def _blank_agents(sc: Scenario, slots: np.ndarray) -> None:
+    """Reset agent `slots` to the padding of `Scenario.empty` (invalid, zeros, lane -1)."""
+    for name in AGENT_FIELDS[3:]:
+        getattr(sc, name)[slots] = 0
+    sc.agent_parked[slots] = False
+    sc.agent_lane[slots] = -1

@@ -131,7 +131,7 @@ def test_no_room_moves_nobody(town):
     sc = PaperSpawner(num_agents=16).sample(town, np.random.default_rng(2))
     sc.region[:] = (1e6, 1e6, 1e6 + 200.0, 1e6 + 200.0)
     before = sc.agent_xy.copy()
-    assert TurnLaneStarts(4).apply(sc, town, np.random.default_rng(0)) == 0
+    assert TurnLaneStarts().apply(sc, town, np.random.default_rng(0), 4) == 0
     np.testing.assert_array_equal(sc.agent_xy, before)
 
 
@@ -140,8 +140,41 @@ def test_no_room_moves_nobody(town):
     [
         ({"turn_lane_starts": -1}, "turn_lane_starts"),
         ({"turn_lane_starts": 2, "max_waypoints": 1}, "max_waypoints"),
+        ({"turn_lane_worlds": 1.5}, "turn_lane_worlds"),
+        ({"turn_lane_worlds": 0.5, "max_waypoints": 1}, "max_waypoints"),
     ],
 )
 def test_bad_settings_name_the_key(kwargs, words):
     with pytest.raises(ConfigError, match=words):
         PaperSpawner(**kwargs)
+
+
+def test_turn_lane_worlds_hold_turn_lane_starts_only(town, table):
+    sp = PaperSpawner(num_agents=16, turn_lane_worlds=1.0)
+    check_spawner(sp, town, samples=4, seed=1)
+    sizes = []
+    for seed in range(16):
+        sc = sp.sample(town, np.random.default_rng(seed))
+        valid = np.flatnonzero(sc.agent_valid)
+        moved = len(_moved(sc, table))
+        if moved == 0:
+            continue  # a region without starts stays a normal world
+        sizes.append(len(valid))
+        assert moved == len(valid)  # every agent on a start row with its waypoints
+        gone = ~sc.agent_valid
+        assert (sc.agent_lane[gone] == -1).all() and not sc.num_waypoints[gone].any()
+        assert not sc.agent_parked.any() and len(valid) >= 1
+        xy = sc.agent_xy[valid].astype(np.float64)
+        d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        assert d.min() >= 15.0 - 1e-3
+    assert len(sizes) >= 10 and np.mean(sizes) > 4  # most regions hold several starts
+
+
+def test_turn_lane_worlds_share(town):
+    sp = PaperSpawner(num_agents=16, turn_lane_worlds=0.25)
+    only = [
+        bool((sc.num_waypoints[sc.agent_valid] == 2).all())
+        for sc in (sp.sample(town, np.random.default_rng(s)) for s in range(120))
+    ]
+    assert 0.1 < np.mean(only) < 0.4
