@@ -5,10 +5,10 @@ run of every suite with the rule-based driver."""
 from __future__ import annotations
 
 import json
-from collections import deque
 
 import numpy as np
 import pytest
+from lanegraph import reaches_by_following
 from sharedmaps import shared_map
 
 from selfplaydrive.drivers import RuleBasedDriver
@@ -66,19 +66,6 @@ def _on_lane(road_map, item, slot: int) -> None:
     assert abs(np.angle(np.exp(1j * (hd[0] - sc.agent_heading[slot])))) < 0.05
 
 
-def _following_reaches(road_map, start: int, target: int) -> bool:
-    lanes, seen, queue = road_map.lanes, {start}, deque([start])
-    while queue:
-        x = queue.popleft()
-        for q in lanes.successors(x):
-            if int(q) == target:
-                return True
-            if q not in seen and not lanes.in_junction[q]:
-                seen.add(int(q))
-                queue.append(int(q))
-    return False
-
-
 # -- generators ------------------------------------------------------------------------------
 def _check_turn(road_map, items) -> None:
     for it in items:
@@ -86,8 +73,8 @@ def _check_turn(road_map, items) -> None:
         assert sc.agent_valid.tolist() == [True, False] and not sc.ped_valid.any() and not sc.lights_enabled
         _on_lane(road_map, it, 0)
         # the start lane cannot reach the turn by following lanes: a lane change is needed
-        assert not _following_reaches(road_map, info["start_lane"], info["junction_lane"])
-        assert _following_reaches(road_map, info["approach_lane"], info["junction_lane"])
+        assert not reaches_by_following(road_map, info["start_lane"], info["junction_lane"])
+        assert reaches_by_following(road_map, info["approach_lane"], info["junction_lane"])
         assert 30.0 <= info["start_distance_m"] <= 100.0
         _, lat, _ = project(it.paths["corridor"], sc.agent_xy[:1].astype(np.float64))
         assert abs(lat[0]) >= 0.75 * info["lane_width_m"]

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 import pytest
+from lanegraph import reaches_by_following
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.eval.suites.geometry import project
@@ -27,19 +26,6 @@ def table(town):
 
 def _spawner(k: int) -> PaperSpawner:
     return PaperSpawner(num_agents=16, turn_lane_starts=k, waypoint_spacing=2.5, lane_change_prob=0.5)
-
-
-def _reaches_by_following(road_map, start: int, target: int) -> bool:
-    lanes, seen, queue = road_map.lanes, {start}, deque([start])
-    while queue:
-        x = queue.popleft()
-        for q in lanes.successors(x):
-            if int(q) == target:
-                return True
-            if q not in seen and not lanes.in_junction[q]:
-                seen.add(int(q))
-                queue.append(int(q))
-    return False
 
 
 def _moved(sc, table) -> dict[int, int]:
@@ -104,7 +90,7 @@ def test_start_lane_needs_a_lane_change(town):
     sites = suite.sites(town)
     for j, _p, w in [sites[i] for i in np.random.default_rng(1).choice(len(sites), 20, replace=False)]:
         if suite.site_starts(geo, j, _p, w) is not None:
-            assert not _reaches_by_following(town, w, j)
+            assert not reaches_by_following(town, w, j)
 
 
 def test_spawner_contract_holds(town):
