@@ -53,8 +53,7 @@ def test_start_rows_are_wrong_lanes_before_a_turn(town, table):
         assert dist[0] < 0.05  # on W's centerline
         assert not lanes.in_junction[w]
         assert 0.0 < table.speed_cap[row] == pytest.approx(0.8 * float(lanes.speed_limit[w]))
-        # no lane followed from W reaches the lane the exit waypoints lie after: some junction
-        # lane ending near the first waypoint is reachable from elsewhere, not from W alone
+        # the two exit waypoints lie 10 m and 30 m along the exit lanes
         wp = table.waypoints[row]
         assert np.hypot(*(wp[1] - wp[0])) == pytest.approx(20.0, abs=0.5)
 
