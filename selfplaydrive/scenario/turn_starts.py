@@ -6,7 +6,7 @@ which lane to take, and it changes late, when that waypoint appears. The paper's
 suite gives only waypoints after the junction: the agent must infer the lane from where the
 route goes. `TurnLaneStarts` puts some agents of a normal world into exactly that situation:
 an agent slot is moved onto a lane from which its coming turn is not legal, 30-100 m before
-the junction, with its waypoints 10 m and 30 m after the turn (`TurnLaneSuite.site_starts`, the
+the junction, with its waypoints 10 m and 30 m after the turn (`scenario.turn_sites`, the
 suite's own site search and start rules), among the world's other traffic.
 
 The bundled town's suite sites are the ones trained on here (other draws of start points and
@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from selfplaydrive.maps.lane_paths import LaneGeometry
 from selfplaydrive.maps.roadmap import RoadMap
+from selfplaydrive.scenario.turn_sites import TurnSites
 from selfplaydrive.scenario.types import Scenario
 
 # tries per placed agent: random starts inside the region checked against the other bodies
@@ -51,17 +53,14 @@ class StartTable:
     waypoints: np.ndarray
 
 
-def start_table(road_map: RoadMap, suite=None) -> StartTable:
-    """All starts of the turn-lane suite's sites on `road_map` (`TurnLaneSuite.site_starts`).
+def start_table(road_map: RoadMap, finder: TurnSites | None = None) -> StartTable:
+    """All starts of all turn-lane sites on `road_map` (`TurnSites.site_starts`).
 
     Args:
         road_map: The map.
-        suite: A `TurnLaneSuite` with the start rules (default: the paper suite's).
+        finder: The site search and start rules (default: the paper suite's).
     """
-    from selfplaydrive.eval.suites.geometry import LaneGeometry
-    from selfplaydrive.eval.suites.turn_lanes import TurnLaneSuite
-
-    suite = suite or TurnLaneSuite()
+    suite = finder or TurnSites()
     geo = LaneGeometry(road_map)
     xy, hd, lane, cap, wp = [], [], [], [], []
     for j, p, w in suite.sites(road_map):

@@ -24,10 +24,10 @@ from selfplaydrive.eval.suites import (
     scripted,
 )
 from selfplaydrive.eval.suites.base import Trajectory
-from selfplaydrive.eval.suites.geometry import point_at, project
 from selfplaydrive.eval.suites.red_lights import SWERVE
 from selfplaydrive.eval.suites.shapes import box_polygons, offset_path
 from selfplaydrive.eval.suites.stop_signs import STOP_ZONE
+from selfplaydrive.maps.lane_paths import point_at, project
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.maps.roadmap import StopKind
 from selfplaydrive.scenario.lights import RED

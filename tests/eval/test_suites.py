@@ -23,8 +23,8 @@ from selfplaydrive.eval.suites import (
     scripted,
 )
 from selfplaydrive.eval.suites.base import Trajectory
-from selfplaydrive.eval.suites.geometry import point_at, project
 from selfplaydrive.eval.suites.stop_lines import classify_stop_line, constant_speed_collision
+from selfplaydrive.maps.lane_paths import point_at, project
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.maps.roadmap import SegmentType
 from selfplaydrive.obs.layout import ObsLayout
@@ -290,8 +290,8 @@ def test_run_all_suites_with_rule_based_driver(town):
 def test_turn_lane_entry_waypoint_variant_names_the_correct_lane():
     """With `entry_waypoint`, the first waypoint lies on the correct corridor that far before the
     junction and the exit waypoints follow; without it the exit waypoints come first."""
-    from selfplaydrive.eval.suites.geometry import cumlen, project
     from selfplaydrive.eval.suites.turn_lanes import TurnLaneSuite
+    from selfplaydrive.maps.lane_paths import cumlen, project
     from selfplaydrive.maps.loader import load_map
 
     town = load_map("default")

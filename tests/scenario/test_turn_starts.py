@@ -7,7 +7,7 @@ import pytest
 from lanegraph import reaches_by_following
 
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.eval.suites.geometry import project
+from selfplaydrive.maps.lane_paths import project
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.scenario.turn_starts import TurnLaneStarts, start_table
@@ -81,8 +81,8 @@ def test_moved_agents_start_on_table_rows_and_keep_their_distance(town, table):
 
 def test_start_lane_needs_a_lane_change(town):
     """The suite's site rule, seen through the table: W never reaches J by lane following."""
-    from selfplaydrive.eval.suites.geometry import LaneGeometry
     from selfplaydrive.eval.suites.turn_lanes import TurnLaneSuite
+    from selfplaydrive.maps.lane_paths import LaneGeometry
 
     suite = TurnLaneSuite()
     geo = LaneGeometry(town)

@@ -43,7 +43,8 @@ from selfplaydrive.eval.suites.base import (
     put_agent,
     warn_shortfall,
 )
-from selfplaydrive.eval.suites.geometry import (
+from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
+from selfplaydrive.maps.lane_paths import (
     LaneGeometry,
     cumlen,
     cut,
@@ -54,7 +55,6 @@ from selfplaydrive.eval.suites.geometry import (
     track,
     wrap,
 )
-from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.scenario.pedestrians import PATH_POINTS
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler

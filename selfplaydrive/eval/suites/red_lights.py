@@ -58,9 +58,9 @@ from selfplaydrive.eval.suites.base import (
     put_agent,
     warn_shortfall,
 )
-from selfplaydrive.eval.suites.geometry import LaneGeometry, cumlen, cut, point_at, project, wrap
 from selfplaydrive.eval.suites.shapes import box_polygons, lane_polygons, offset_path
 from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
+from selfplaydrive.maps.lane_paths import LaneGeometry, cumlen, cut, point_at, project, wrap
 from selfplaydrive.maps.roadmap import RoadMap
 
 # the gate and the controlled area: one definition for this suite and the red_intersection

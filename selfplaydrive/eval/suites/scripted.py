@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from selfplaydrive.eval.suites.base import SuiteScenario
-from selfplaydrive.eval.suites.geometry import cumlen, cut, join, point_at, project
 from selfplaydrive.eval.suites.red_lights import SWERVE
 from selfplaydrive.eval.suites.shapes import offset_path
+from selfplaydrive.maps.lane_paths import cumlen, cut, join, point_at, project
 
 BRAKE = 3.0  # [m/s^2] deceleration used to stop at a hold point
 ROLL_SPEED = 1.5  # [m/s] crawl of the rolling stop: between the stop and rolling thresholds

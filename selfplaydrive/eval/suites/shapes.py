@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from selfplaydrive.eval.suites.geometry import LaneGeometry, cumlen, point_at
+from selfplaydrive.maps.lane_paths import LaneGeometry, cumlen, point_at
 
 
 def box_corners(xy: np.ndarray, heading: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:

@@ -45,7 +45,8 @@ from selfplaydrive.eval.suites.base import (
     put_agent,
     warn_shortfall,
 )
-from selfplaydrive.eval.suites.geometry import (
+from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
+from selfplaydrive.maps.lane_paths import (
     LaneGeometry,
     boxes_overlap,
     cumlen,
@@ -54,7 +55,6 @@ from selfplaydrive.eval.suites.geometry import (
     project,
     track,
 )
-from selfplaydrive.eval.suites.turn_lanes import CAR_CATEGORIES
 from selfplaydrive.maps.roadmap import RoadMap
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
 

@@ -32,8 +32,8 @@ import numpy as np
 
 from selfplaydrive.eval.stats import proportion
 from selfplaydrive.eval.suites.base import SuiteScenario, Trajectory
-from selfplaydrive.eval.suites.geometry import track
 from selfplaydrive.eval.suites.stop_lines import MAIN, SIDE, StopLineSuite
+from selfplaydrive.maps.lane_paths import track
 from selfplaydrive.maps.roadmap import RoadMap, StopKind
 
 OUTCOMES = ("full_stop", "rolling_stop", "no_stop", "not_reached", "collision")

@@ -1,4 +1,5 @@
-"""Polyline and lane-chain helpers of the rule-adherence suites (paper section 5.3).
+"""Polyline and lane-chain helpers of the rule-adherence suites (paper section 5.3) and the
+turn-lane training starts (`scenario/turn_sites.py`).
 
 Everything here is float64 NumPy in the map's local frame [m]. A *path* is an (n, 2) polyline;
 its arc length runs from 0 at the first point. Lateral offsets are signed, positive to the
