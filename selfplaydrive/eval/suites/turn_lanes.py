@@ -1,20 +1,16 @@
 """Suite "turning from the correct lane" (paper section 5.3): the ego must turn at the next
 junction but starts in a lane from which the turn is not legal, so it has to change lanes.
 
-Generation (from the lane graph only, so it works on procedural and Lanelet2 maps; the site
-search is `scenario.turn_sites.TurnSites`, shared with the turn-lane training starts):
+Generation (from the lane graph only, so it works on procedural and Lanelet2 maps): the sites,
+turns J with a wrong start lane W beside their correct lanes, come from
+`scenario.turn_sites.TurnSites` (its docstring has the rules; the turn-lane training starts use
+the same search).
 
-1. A *turn* is a junction lane J whose heading changes by at least `min_turn` (left or right).
-   Its *correct lanes* are the non-junction lanes from which J is reached by lane following
-   alone (backward search from J's predecessors, up to `search_back` m).
-2. A *wrong lane* W is a neighbour (left/right, up to three hops) of a correct lane that is not
-   itself correct, yet reaches a correct lane by following lanes and legal lane changes toward
-   the turn side only (a left turn needs changes to the left). Each (J, W) pair is a site.
-3. At a site drawn at random, the ego is placed on W's centerline, heading along it,
-   `start_distance` m (drawn) before J's start measured along the correct corridor, at least
-   0.75 lane widths beside it, leaving at least `change_room` m of W ahead when the change must
-   happen on W itself. Initial speed U(`speed`) capped by 0.8 times the speed limit; a car-sized vehicle;
-   waypoints on the exit lane 10 m and 30 m after the junction force the turn.
+At a site drawn at random, the ego is placed on W's centerline, heading along it,
+`start_distance` m (drawn) before J's start measured along the correct corridor, at least 0.75
+lane widths beside it, leaving at least `change_room` m of W ahead when the change must happen
+on W itself. Initial speed U(`speed`) capped by 0.8 times the speed limit; a car-sized vehicle;
+waypoints on the exit lane 10 m and 30 m after the junction force the turn.
 
 Classification (`classify_turn`, pure, from the trajectory): the ego *turned* when its centre
 came within half a lane width + 1 m of the exit lane, heading within 45 degrees of it. The
