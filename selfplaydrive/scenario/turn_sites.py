@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from selfplaydrive.maps.lane_paths import LaneGeometry, cumlen, point_at, project
-from selfplaydrive.maps.roadmap import RoadMap
 
 
 @dataclass
@@ -74,9 +73,9 @@ class TurnSites:
         self.change_room = float(change_room)
         self.search_back = float(search_back)
 
-    def sites(self, road_map: RoadMap) -> list[tuple[int, int, int]]:
-        """All (junction lane J, its approach lane P, wrong start lane W) triples of the map."""
-        geo = LaneGeometry(road_map)
+    def sites(self, geo: LaneGeometry) -> list[tuple[int, int, int]]:
+        """All (junction lane J, its approach lane P, wrong start lane W) triples of the map of
+        `geo` (`LaneGeometry(road_map)`, shared with `site_starts`)."""
         L = geo.lanes
         out = []
         for j in np.flatnonzero(L.in_junction & geo.vehicle):

@@ -63,7 +63,7 @@ def start_table(road_map: RoadMap, finder: TurnSites | None = None) -> StartTabl
     suite = finder or TurnSites()
     geo = LaneGeometry(road_map)
     xy, hd, lane, cap, wp = [], [], [], [], []
-    for j, p, w in suite.sites(road_map):
+    for j, p, w in suite.sites(geo):
         st = suite.site_starts(geo, j, p, w)
         if st is None:
             continue
@@ -130,54 +130,32 @@ class TurnLaneStarts:
                 the ones placed before, and the agents that find no start are removed (their
                 slots made invalid), so the world holds turn-lane starts only.
         """
-        if clear:
-            return self._clear(sc, road_map, rng, count)
         table = self.table(road_map)
         lo = sc.region[:2].astype(np.float64) + REGION_MARGIN
         hi = sc.region[2:].astype(np.float64) - REGION_MARGIN
         inside = np.flatnonzero(np.all((table.xy > lo) & (table.xy < hi), axis=1))
-        slots = np.flatnonzero(sc.agent_valid & ~sc.agent_parked)
+        slots = np.flatnonzero(sc.agent_valid if clear else sc.agent_valid & ~sc.agent_parked)
         if count <= 0 or len(inside) == 0 or len(slots) == 0:
-            return 0
-        slots = slots[rng.permutation(len(slots))][:count]
-        static_xy = sc.static_xy[sc.static_valid].astype(np.float64)
-        static_r = 0.5 * np.hypot(sc.static_length[sc.static_valid], sc.static_width[sc.static_valid])
-        moved = 0
-        for slot in slots:
-            row = self._fit(sc, int(slot), table, inside, static_xy, static_r, rng)
-            if row < 0:
-                continue
-            self._move(sc, int(slot), table, row, rng)
-            moved += 1
-        return moved
-
-    def _clear(self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator, count: int) -> int:
-        """`apply(clear=True)`: all agents to turn-lane starts or out of the world."""
-        table = self.table(road_map)
-        lo = sc.region[:2].astype(np.float64) + REGION_MARGIN
-        hi = sc.region[2:].astype(np.float64) - REGION_MARGIN
-        inside = np.flatnonzero(np.all((table.xy > lo) & (table.xy < hi), axis=1))
-        slots = np.flatnonzero(sc.agent_valid)
-        if len(inside) == 0 or len(slots) == 0:
             return 0
         slots = slots[rng.permutation(len(slots))]
         static_xy = sc.static_xy[sc.static_valid].astype(np.float64)
         static_r = 0.5 * np.hypot(sc.static_length[sc.static_valid], sc.static_width[sc.static_valid])
-        saved = {name: getattr(sc, name).copy() for name in AGENT_FIELDS}
-        sc.agent_valid[slots] = False  # placed back one by one
+        saved = {name: getattr(sc, name).copy() for name in AGENT_FIELDS} if clear else None
+        if clear:
+            sc.agent_valid[slots] = False  # placed back one by one
         moved = 0
         for slot in slots[:count]:
             row = self._fit(sc, int(slot), table, inside, static_xy, static_r, rng)
             if row < 0:
                 continue
             self._move(sc, int(slot), table, row, rng)
-            sc.agent_valid[slot] = True
             moved += 1
-        if moved == 0:  # not one start fits: the world stays a normal one
-            for name, value in saved.items():
-                getattr(sc, name)[...] = value
-            return 0
-        _blank_agents(sc, np.flatnonzero(~sc.agent_valid))
+        if saved is not None:
+            if moved == 0:  # not one start fits: the world stays a normal one
+                for name, value in saved.items():
+                    getattr(sc, name)[...] = value
+            else:
+                _blank_agents(sc, np.flatnonzero(~sc.agent_valid))
         return moved
 
     def _fit(self, sc, slot, table, inside, static_xy, static_r, rng) -> int:
@@ -202,6 +180,7 @@ class TurnLaneStarts:
         sc.agent_speed[slot] = min(rng.uniform(*self.speed), table.speed_cap[row])
         sc.agent_lane[slot] = table.lane[row]
         sc.agent_parked[slot] = False
+        sc.agent_valid[slot] = True
         sc.waypoints[slot, :2] = table.waypoints[row]
         sc.waypoints[slot, 2:] = table.waypoints[row, 1]
         sc.num_waypoints[slot] = 2

@@ -77,11 +77,7 @@ class TurnLaneSuite:
         self.finder = TurnSites(min_turn, start_distance, change_room, search_back)
         if not 0.0 <= speed[0] <= speed[1]:
             raise ValueError(f"speed: expected 0 <= low <= high [m/s], got {speed}")
-        self.min_turn = float(min_turn)
-        self.start_distance = (float(start_distance[0]), float(start_distance[1]))
         self.speed = (float(speed[0]), float(speed[1]))
-        self.change_room = float(change_room)
-        self.search_back = float(search_back)
         self.episode_length = float(episode_length)
         if entry_waypoint is not None and not entry_waypoint >= 0.0:
             raise ValueError(f"entry_waypoint: expected None or a distance >= 0 [m], got {entry_waypoint!r}")
@@ -90,14 +86,14 @@ class TurnLaneSuite:
     # -- generation -------------------------------------------------------------------------
     def sites(self, road_map: RoadMap) -> list[tuple[int, int, int]]:
         """All (junction lane J, its approach lane P, wrong start lane W) triples of the map."""
-        return self.finder.sites(road_map)
+        return self.finder.sites(LaneGeometry(road_map))
 
     def generate(
         self, road_map: RoadMap, rng: np.random.Generator, count: int, map_index: int = 0
     ) -> list[SuiteScenario]:
         """Up to `count` scenarios at distinct sites (random order); fewer with a warning."""
         geo = LaneGeometry(road_map)
-        sites = self.sites(road_map)
+        sites = self.finder.sites(geo)
         order = rng.permutation(len(sites))
         sizes = VehicleSizeSampler(CAR_CATEGORIES)
         out: list[SuiteScenario] = []
