@@ -384,7 +384,8 @@ cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, 
     0. One state column: 0 = no entry on record, else 1 + the lane whose end gate the centre
     crossed last (forward; the lowest lane if a move crosses several). Entry gates are read
     before check gates (a move crosses a junction's start before a lane's middle); crossing
-    check gates decides and clears the record. Params: cos of the largest heading deviation."""
+    check gates decides and clears the record. Params: cos of the largest heading deviation,
+    entry_back [m] (where the entry gates stand: the tables' business, not read here)."""
     cdef int a, i, j, e, s, A = sim.A, off = <int>args[0]
     cdef float cmax = args[H_PARAMS], px, py, qx, qy
     cdef const float* g
@@ -396,7 +397,7 @@ cdef void term_turn_lane(const Sim* sim, const Params* prm, const Atlas* atlas, 
         if not sim.active[i]:
             continue
         out[<int64_t>a * stride] = 0.0
-        if not map_cell(args, 1, sim.map_id[w], sim.x[i], sim.y[i], &c):
+        if not map_cell(args, 2, sim.map_id[w], sim.x[i], sim.y[i], &c):
             continue
         st = &sim.term_state[<int64_t>i * sim.term_state_dim + off]
         px, py, qx, qy = sim.px[i], sim.py[i], sim.x[i], sim.y[i]

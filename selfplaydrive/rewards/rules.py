@@ -73,6 +73,8 @@ class RuleTerm:
         doc: One line for listings.
         kernel: Name of the kernel in _sim/rules.pyx (default: `name`; a renamed copy keeps it).
         grid: (cell edge, reach) [m] of the per-map grids (rule_tables.py `grid_body`).
+        table_params: How many of the last parameters shape the map tables: `tables` takes
+            them after the map; the kernel skips them.
     """
 
     name: str
@@ -83,6 +85,7 @@ class RuleTerm:
     doc: str = ""
     kernel: str = ""
     grid: tuple[float, float] = (CELL, REACH)
+    table_params: int = 0
 
     def with_args(self, *args: float) -> RuleTerm:
         """This term with other parameter values (``{weight: W, args: [...]}`` in a reward).
@@ -107,9 +110,10 @@ class RuleTerm:
         """The kernel term whose args pack `maps`' tables (world w reads ``maps[map_id[w]]``)."""
         from selfplaydrive._sim import rules
 
+        extra = self.params[len(self.params) - self.table_params :]
         bodies = []
         for m in maps:
-            records, boxes, scalar = self.tables(m)
+            records, boxes, scalar = self.tables(m, *extra)
             bodies.append(grid_body(records, boxes, *self.grid, scalar=scalar))
         args = pack(self.name, self.params, bodies)
         address = int(rules.rule_term_addresses()[self.kernel or self.name])
@@ -176,20 +180,33 @@ def lane_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
     return rec, np.concatenate([lo, hi], axis=1), float(rec[:, 5].min()) if len(rec) else 0.0
 
 
-def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
+def turn_records(road_map: RoadMap, entry_back: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
     """Gates of the turn_lane term: (ax, ay, ex, ey, ux, uy, kind, lane, n, p_0 .. p_{K-1})
     with K = `TURN_PREDECESSORS`, and boxes.
 
     Each gate is the segment a .. a + e across a lane, e perpendicular to the lane's unit
     direction u there, |e| = the lane's width (half a width either side of the centerline).
-    Kind `TURN_ENTRY`: at the last point of a non-junction vehicle lane with a vehicle
-    successor in a junction (n = 0). Kind `TURN_CHECK`: at half the arc length of a junction
+    Kind `TURN_ENTRY`: on a non-junction vehicle lane with a vehicle successor in a junction,
+    `entry_back` m of arc length before its last point (at its first point if it is shorter;
+    0: at its last point), n = 0. Kind `TURN_CHECK`: at half the arc length of a junction
     vehicle lane; p_0 .. p_{n-1} are its non-junction vehicle predecessors (the entry lanes it
     is legal from; the rest of the row is -1). Lane ids index the map's `lanes`.
 
+    Args:
+        road_map: The map.
+        entry_back: [m] how far before the junction the entry lane is read (>= 0). With 10,
+            a car must be in a lane that leads to its junction lane 10 m before the junction,
+            not only when it crosses the junction's start (docs/rewards.md "turn_lane").
+
     Raises:
-        ConfigError: A junction lane with more than `TURN_PREDECESSORS` such predecessors.
+        ConfigError: A junction lane with more than `TURN_PREDECESSORS` such predecessors,
+            or a negative `entry_back`.
     """
+    if not entry_back >= 0.0:
+        raise ConfigError(
+            "reward term 'turn_lane': entry_back must be a distance >= 0 [m] before the junction, "
+            f"got {entry_back!r}"
+        )
     lanes = road_map.lanes
     vehicle = np.asarray(lanes.kind) != int(LaneKind.BICYCLE)
     junction = np.asarray(lanes.in_junction, bool) & vehicle
@@ -207,7 +224,8 @@ def turn_records(road_map: RoadMap) -> tuple[np.ndarray, np.ndarray, float]:
             rows.append(_gate(point, u, float(lanes.width[i]), TURN_CHECK, i, preds))
         elif any(junction[s] for s in lanes.successors(i)):
             p = lanes.centerlines[i].astype(np.float64)
-            rows.append(_gate(p[-1], _last_direction(p), float(lanes.width[i]), TURN_ENTRY, i, []))
+            point, u = (p[-1], _last_direction(p)) if entry_back == 0.0 else _point_before_end(p, entry_back)
+            rows.append(_gate(point, u, float(lanes.width[i]), TURN_ENTRY, i, []))
     rec = np.array(rows, np.float64).reshape(-1, 9 + TURN_PREDECESSORS)
     b = rec[:, :2] + rec[:, 2:4]
     boxes = np.concatenate([np.minimum(rec[:, :2], b), np.maximum(rec[:, :2], b)], axis=1)
@@ -243,6 +261,16 @@ def _point_at_half_length(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     half = 0.5 * ends[-1]
     k = min(int(np.searchsorted(ends, half)), len(ln) - 1)
     return start[k] + u[k] * (half - (ends[k] - ln[k])), u[k]
+
+
+def _point_before_end(p: np.ndarray, back: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point `back` m of arc length before the centerline's end (its first point if it is
+    shorter) and the unit direction of its piece."""
+    start, u, ln = _pieces(p)
+    ends = np.cumsum(ln)
+    s = max(float(ends[-1]) - back, 0.0)
+    k = min(int(np.searchsorted(ends, s)), len(ln) - 1)
+    return start[k] + u[k] * (s - (ends[k] - ln[k])), u[k]
 
 
 def _lane_direction(road_map: RoadMap, lane: int, pts: np.ndarray) -> np.ndarray:
@@ -295,11 +323,16 @@ RULE_TERMS = (
     ),
     RuleTerm(
         "turn_lane",
-        (math.cos(math.radians(45.0)),),
-        ("cos of the largest heading deviation from the junction lane",),
+        # entry_back 0: the lane is read where the car crosses the junction's start
+        (math.cos(math.radians(45.0)), 0.0),
+        (
+            "cos of the largest heading deviation from the junction lane",
+            "entry_back [m]: the entry lane is read this far before the junction",
+        ),
         turn_records,
         state_dim=1,
         doc="R = -1 on driving through a junction lane the lane entered from does not lead to",
         grid=(5.0, REACH),
+        table_params=1,
     ),
 )

@@ -28,12 +28,13 @@ from selfplaydrive.rewards.rules import (
 F = np.float32
 RED = 1  # SD_LIGHT_RED
 HALF_PI = 1.5707963267948966
-_TABLES: dict[tuple[int, str], tuple[RoadMap, np.ndarray]] = {}
+_TABLES: dict[tuple[int, str, tuple[float, ...]], tuple[RoadMap, np.ndarray]] = {}
 
 
-def _table(road_map: RoadMap, kind: str) -> np.ndarray:
-    """The map's float32 records of one term (as packed), built once per map."""
-    key = (id(road_map), kind)
+def _table(road_map: RoadMap, kind: str, *extra: float) -> np.ndarray:
+    """The map's float32 records of one term (as packed), built once per map and `extra`
+    (the term's table parameters)."""
+    key = (id(road_map), kind, tuple(float(e) for e in extra))
     if key not in _TABLES or _TABLES[key][0] is not road_map:
         build = {
             "zone": zone_records,
@@ -42,7 +43,7 @@ def _table(road_map: RoadMap, kind: str) -> np.ndarray:
             "lane": lane_records,
             "turn": turn_records,
         }
-        _TABLES[key] = (road_map, build[kind](road_map)[0].astype(F))
+        _TABLES[key] = (road_map, build[kind](road_map, *extra)[0].astype(F))
     return _TABLES[key][1]
 
 
@@ -230,7 +231,7 @@ def turn_lane(
     the state column after the step: 0 or 1 + the entry lane)."""
     cmax = F(params[0])
     W, A = _agents(st)
-    tables = [_table(m, "turn") for m in maps]
+    tables = [_table(m, "turn", params[1]) for m in maps]
     out, new = np.zeros(W * A, F), np.array(state, F).copy()
     for w in range(W):
         g = tables[int(st.map_id[w])]

@@ -72,8 +72,11 @@ def road():
     return rule_road()
 
 
-def reward(*names):
-    return LinearReward({**{n: 1.0 for n in TERM_NAMES}, **{n: 1.0 for n in names}})
+def reward(*names, args=None):
+    """The paper's terms and `names` at weight 1 (`args`: name -> the term's parameters)."""
+    args = args or {}
+    extra = {n: {"weight": 1.0, "args": list(args[n])} if n in args else 1.0 for n in names}
+    return LinearReward({**{n: 1.0 for n in TERM_NAMES}, **extra})
 
 
 def drive(road, cars, steps=40, light=RED, peds=(), accel=None):
@@ -170,15 +173,16 @@ def test_wrong_way_costs_one_per_second(road):
 
 
 # -- kernels against the NumPy references -------------------------------------------------
-def random_rollout(maps, steps, threads=1, worlds=4, seed=3, check=True):
+def random_rollout(maps, steps, threads=1, worlds=4, seed=3, check=True, args=None):
     """Random driving, mostly ahead (accelerations >= 0, steering within the middle of the
     table) so cars reach junctions; with `check`, every step's rule columns and stop_sign state
-    equal the NumPy references. Returns the env and how often each term fired."""
+    equal the NumPy references (`args`: name -> parameters other than the defaults). Returns
+    the env and how often each term fired."""
     spawner = PaperSpawner(num_agents=16)
-    env = VecEnv(maps, spawner, worlds, seed=seed, num_threads=threads, reward=reward(*RULES))
+    env = VecEnv(maps, spawner, worlds, seed=seed, num_threads=threads, reward=reward(*RULES, args=args))
     env.reset(seed)
     rng = np.random.default_rng(seed)
-    params = {n: get_term(n).params for n in RULES}
+    params = {n: get_term(n).params for n in RULES} | dict(args or {})
     cols = {n: env.term_names.index(n) for n in RULES}
     offset = {c.name: int(c.term.args[0]) for c in env.reward.columns if c.name in STATEFUL}
     assert sorted(offset.values()) == [0, 1]
@@ -221,6 +225,9 @@ def test_kernels_equal_numpy_references_on_random_rollouts(road):
     assert fired["red_intersection"] > 0 and fired["wrong_way"] > 0 and fired["stop_sign"] > 0, fired
     # wrong-lane turns need the bundled town's multi-lane approaches
     _, fired = random_rollout(load_map("default"), steps=150)
+    assert fired["turn_lane"] > 0, fired
+    # entry gates 10 m before the junction (the tables change, the kernel does not)
+    _, fired = random_rollout(load_map("default"), steps=150, args={"turn_lane": (0.7071, 10.0)})
     assert fired["turn_lane"] > 0, fired
 
 
@@ -463,16 +470,15 @@ def centre_path(road_map, pieces):
     return np.stack([np.interp(t, s[keep], pts[keep, 0]), np.interp(t, s[keep], pts[keep, 1])], axis=1)
 
 
-def drive_path(road_map, paths, reset_before=()):
+def drive_path(road_map, paths, reset_before=(), entry_back=0.0):
     """Slot 0 posed on each point of the joined `paths` in turn and stepped once towards the
     next (speed = 1 m / dt, accel and steering 0). Returns the turn_lane column (steps,) and
     its state (steps,) after each step; the world restarts before path k in `reset_before`."""
     start = paths[0][0]
     sc = blank_scenario(road_map, 0, start, 60.0)
     put_agent(sc, 0, start, 0.0, 0.0, (4.5, 2.0), 1, np.array([[500.0, 500.0]]))
-    env = VecEnv(
-        road_map, FixedScenarioSpawner([sc]), 1, actions=ContinuousActions(), reward=reward("turn_lane")
-    )
+    rew = reward("turn_lane", args={"turn_lane": (get_term("turn_lane").params[0], entry_back)})
+    env = VecEnv(road_map, FixedScenarioSpawner([sc]), 1, actions=ContinuousActions(), reward=rew)
     env.reset(0)
     col = env.term_names.index("turn_lane")
     off = next(int(c.term.args[0]) for c in env.reward.columns if c.name == "turn_lane")
@@ -511,6 +517,28 @@ def test_turn_lane_pays_once_for_turning_from_the_wrong_lane(junction):
         junction, [centre_path(junction, [(-40.0, Y0), (-25.0, Y0), (-12.0, Y1), 0, 2, 4])]
     )
     assert changed.sum() == 0.0 and state.max() == 1.0 and state[-1] == 0.0
+
+
+def test_turn_lane_entry_back_reads_the_lane_before_the_junction(junction):
+    """With entry_back = 10 m the entry gates stand 10 m before the approach lanes' ends: a
+    change into the turning lane finished 8 m before the junction pays -1, one finished 12 m
+    before pays 0; with the default (gates at the ends) the late change pays 0."""
+    end = junction.lanes.centerlines[0][-1].astype(np.float64)
+    for back, x in ((0.0, 0.0), (10.0, -10.0), (100.0, -60.0)):  # lane 0 is 60 m long
+        rec = turn_records(junction, back)[0]
+        gate = rec[(rec[:, 6] == 0.0) & (rec[:, 7] == 0.0)][0]
+        np.testing.assert_allclose(gate[:2] + 0.5 * gate[2:4], end + np.array([x, 0.0]), atol=1e-9)
+        np.testing.assert_allclose(gate[4:6], [1.0, 0.0], atol=1e-12)
+    assert (turn_records(junction, 0.0)[0] == turn_records(junction)[0]).all()
+    late = centre_path(junction, [(-40.0, Y0), (-8.0, Y0), (-2.0, Y1), 2, 4])
+    early = centre_path(junction, [(-40.0, Y0), (-25.0, Y0), (-12.0, Y1), (-2.0, Y1), 2, 4])
+    assert drive_path(junction, [late])[0].sum() == 0.0
+    values, state = drive_path(junction, [late], entry_back=10.0)
+    assert values.sum() == -1.0 and state.max() == 2.0  # lane 1 on record at x = -10
+    values, state = drive_path(junction, [early], entry_back=10.0)
+    assert values.sum() == 0.0 and state.max() == 1.0
+    with pytest.raises(ConfigError, match=r"entry_back must be a distance >= 0 .* got -5.0"):
+        LinearReward({"turn_lane": {"weight": 1.0, "args": [0.7, -5.0]}}).bind([junction])
 
 
 def test_turn_lane_decides_once_per_passage_and_forgets_at_spawn(junction):
