@@ -12,10 +12,10 @@ Per map:
    coefficients of conf/reward/eval.yaml, every penalty at its maximum): the trainer's own
    `evaluate` on `--episodes` fresh world-episodes (seed + `EVAL_SEED_OFFSET`, as the final
    evaluation of `selfplaydrive train`), with the run's spawner (its agents per world) and with
-   the paper's 32 agents per world, sampled and greedy actions (turn-lane starts, a training
-   curriculum of `PaperSpawner`, are switched off: the paper's spawner). Completion is reached waypoints
-   over assigned ones; the collision and road-edge rates are the share of agents with at least
-   one such contact.
+   the paper's 32 agents per world, sampled and greedy actions (turn-lane starts and turn-lane
+   worlds, training curricula of `PaperSpawner`, are switched off: the paper's spawner).
+   Completion is reached waypoints over assigned ones; the collision and road-edge rates are the
+   share of agents with at least one such contact.
    For the run's spawner and greedy actions, `selfplaydrive.eval.misses` also charges every
    missed waypoint to how its agent ended (vehicle, pedestrian, road edge, off route, still
    pending), in rollouts of its own from the same reset seed.
@@ -69,6 +69,7 @@ def completion_eval(
     from selfplaydrive import pretrained
     from selfplaydrive.builder import build_env, build_model, compose, instantiate
     from selfplaydrive.policies import find_run_config, load_checkpoint, load_run_config
+    from selfplaydrive.scenario.spawner import without_curricula
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
 
@@ -81,8 +82,7 @@ def completion_eval(
     cfg.env.num_threads = 1
     if agents is not None:
         cfg.spawner.num_agents = int(agents)
-    if "turn_lane_starts" in cfg.spawner:  # a training curriculum, not the evaluation protocol
-        cfg.spawner.turn_lane_starts = 0
+    without_curricula(cfg.spawner)  # turn-lane starts and worlds: training, not the protocol
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
     model = build_model(cfg, env)

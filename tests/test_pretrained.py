@@ -144,3 +144,28 @@ def test_eval_completion_uses_the_training_spawner_with_evaluation_coefficients(
     assert done["protocol"]["spawner"] == "the training run's spawner"
     assert done["episodes"] == 1 and 0 < done["agents"] <= 16
     assert 0.0 <= done["waypoint_completion"] <= 1.0
+
+
+def test_evaluations_switch_the_training_curricula_off():
+    """Turn-lane starts and worlds are training curricula: the completion and diversity runs of
+    `selfplaydrive eval` (and `pretrained_report.py`) score a policy without them."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.eval.app import _training_spawner
+    from selfplaydrive.policies import load_run_config
+    from selfplaydrive.scenario.spawner import CURRICULUM_OPTIONS, without_curricula
+
+    run_cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
+    run_cfg.spawner.turn_lane_worlds, run_cfg.spawner.turn_lane_starts = 0.5, 3
+    before = OmegaConf.to_container(run_cfg)
+    for eval_coefficients in (False, True):
+        spawner = _training_spawner(SimpleNamespace(run_config=run_cfg), eval_coefficients)
+        assert (spawner.turn_lane_worlds, spawner.turn_lane_starts) == (0.0, 0)
+        assert spawner.num_agents == run_cfg.spawner.num_agents
+        assert spawner.conditioning.mode == ("eval" if eval_coefficients else "train")
+    assert OmegaConf.to_container(run_cfg) == before  # the run's own config is left as it was
+    off = without_curricula({"num_agents": 8, "turn_lane_worlds": 0.25})
+    assert off == {"num_agents": 8, "turn_lane_worlds": 0.0}
+    assert set(CURRICULUM_OPTIONS) == {"turn_lane_starts", "turn_lane_worlds"}

@@ -341,9 +341,10 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
 
 def _training_spawner(target: EvalTarget, eval_coefficients: bool = False) -> Any:
     """The spawner of the policy's training run, else the paper's; its coefficients drawn from
-    the run's training distribution, or (`eval_coefficients`) the paper's fixed evaluation values."""
+    the run's training distribution, or (`eval_coefficients`) the paper's fixed evaluation values.
+    The run's training curricula (turn-lane starts and worlds, `CURRICULUM_OPTIONS`) are off."""
     from selfplaydrive.scenario.conditioning import ConditioningSampler
-    from selfplaydrive.scenario.spawner import PaperSpawner
+    from selfplaydrive.scenario.spawner import PaperSpawner, without_curricula
 
     if target.run_config is None or "spawner" not in target.run_config:
         return PaperSpawner(conditioning=ConditioningSampler(mode="eval") if eval_coefficients else None)
@@ -351,9 +352,9 @@ def _training_spawner(target: EvalTarget, eval_coefficients: bool = False) -> An
 
     from selfplaydrive.builder import build_spawner
 
-    run_cfg = target.run_config
+    run_cfg = OmegaConf.create(OmegaConf.to_container(target.run_config, resolve=False))
+    without_curricula(run_cfg.spawner)  # turn-lane starts and worlds train; they are not the world
     if eval_coefficients:
-        run_cfg = OmegaConf.create(OmegaConf.to_container(run_cfg, resolve=False))
         run_cfg.reward.mode = "eval"
     return build_spawner(run_cfg)  # with the run's reward group's sampler
 

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import warnings
 import weakref
-from collections.abc import Sequence
+from collections.abc import MutableMapping, Sequence
 
 import numpy as np
 
@@ -52,6 +52,21 @@ from selfplaydrive.scenario.placement import sample_region
 from selfplaydrive.scenario.turn_starts import TurnLaneStarts
 from selfplaydrive.scenario.types import Scenario
 from selfplaydrive.scenario.vehicles import VehicleSizeSampler
+
+# `PaperSpawner` options that are training curricula, not part of the world (off in the paper),
+# with their "off" values: evaluations of a policy in its training spawner switch them off
+# (`without_curricula`), so a run trained with turn-lane worlds is not scored on them.
+CURRICULUM_OPTIONS = {"turn_lane_starts": 0, "turn_lane_worlds": 0.0}
+
+
+def without_curricula(spawner_cfg: MutableMapping) -> MutableMapping:
+    """Set every `CURRICULUM_OPTIONS` key present in a spawner config (a dict or an OmegaConf
+    node of `PaperSpawner` arguments) to its "off" value, in place; returns it."""
+    for key, off in CURRICULUM_OPTIONS.items():
+        if key in spawner_cfg:
+            spawner_cfg[key] = off
+    return spawner_cfg
+
 
 # pieces per route at most (the default of `maps.routing.sample_routes`)
 MAX_ROUTE_PIECES = 128
