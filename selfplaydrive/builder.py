@@ -128,7 +128,7 @@ def instantiate(node: Any, **kwargs: Any) -> Any:
 
 
 def build_maps(node: Any) -> list[RoadMap]:
-    """Build the env's map(s): a map loader/`load_map` node, or a list of such nodes."""
+    """Build the env's map(s): a map loader/`load_map`/`load_maps` node, or a list of such nodes."""
     from omegaconf import OmegaConf
 
     nodes = list(node) if OmegaConf.is_list(node) or isinstance(node, list) else [node]
@@ -137,9 +137,12 @@ def build_maps(node: Any) -> list[RoadMap]:
         obj = instantiate(item)
         if hasattr(obj, "load") and not isinstance(obj, RoadMap):
             obj = obj.load()
-        if not isinstance(obj, RoadMap):
-            raise ConfigError(f"map: expected a RoadMap or a loader with .load(), got {type(obj).__name__}")
-        maps.append(obj)
+        several = list(obj) if isinstance(obj, (list, tuple)) else [obj]  # map=several: load_maps
+        if not several or not all(isinstance(m, RoadMap) for m in several):
+            raise ConfigError(
+                f"map: expected a RoadMap, a list of them or a loader with .load(), got {type(obj).__name__}"
+            )
+        maps.extend(several)
     return maps
 
 

@@ -14,7 +14,7 @@ from hydra.utils import get_object
 from omegaconf import OmegaConf
 
 from selfplaydrive.builder import build_env, build_maps, build_spawner, compose, valid_options
-from selfplaydrive.errors import ConfigError
+from selfplaydrive.errors import ConfigError, MapError
 from selfplaydrive.sim.reward_settings import CONSTANTS
 
 # arguments the builder or the trainer passes at run time, never from YAML
@@ -88,6 +88,23 @@ def test_map_options_instantiate():
     default_npz = resources.files("selfplaydrive").parent / "maps" / "default_town.npz"
     cfg = compose("sim", ["map=file", f"map.spec={default_npz}"])
     assert build_maps(cfg.map)[0].name == "default_town"
+
+
+def test_several_maps_option():
+    """map=several: one env over the bundled town and a procedural town; each world draws one."""
+    cfg = compose(
+        "sim",
+        ["map=several", "map.specs=[default,'procedural:seed=3,size=500,num_roundabouts=0,shoulder=0.0']"],
+    )
+    maps = build_maps(cfg.map)
+    assert [m.name for m in maps] == ["default_town", "town_3"]
+    env = build_env(compose("sim", ["env.num_worlds=8"]), maps=maps)
+    env.reset(seed=0)
+    assert set(env.state.map_id.tolist()) == {0, 1}  # 8 worlds draw both maps
+    with pytest.raises(MapError, match=r"map.specs: expected a non-empty list .* got 'default'"):
+        build_maps(compose("sim", ["map=several", "map.specs=default"]).map)
+    with pytest.raises(MapError, match="got \\[\\]"):
+        build_maps(compose("sim", ["map=several", "map.specs=[]"]).map)
 
 
 def test_tartu_map_option(monkeypatch):

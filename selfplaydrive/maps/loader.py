@@ -23,7 +23,7 @@ import json
 import logging
 import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,14 @@ from selfplaydrive.maps import cache
 from selfplaydrive.maps.base import MapLoader
 from selfplaydrive.maps.roadmap import RoadMap
 
-__all__ = ["SUPPORTED", "cache_path_for", "default_cache_dir", "load_map", "parse_procedural_spec"]
+__all__ = [
+    "SUPPORTED",
+    "cache_path_for",
+    "default_cache_dir",
+    "load_map",
+    "load_maps",
+    "parse_procedural_spec",
+]
 
 log = logging.getLogger(__name__)
 
@@ -242,3 +249,23 @@ def load_map(
             )
         return cache.load_roadmap(path)
     return _load_source_file(path, cache_dir, rebuild, use_cache, loader_kwargs)
+
+
+def load_maps(specs: Sequence[str | os.PathLike[str] | RoadMap], **kwargs: Any) -> list[RoadMap]:
+    """Several maps for one env (`map=several`): every world draws one of them, uniformly, at
+    each reset (`VecEnv`), e.g. the bundled town beside procedural towns of other lane widths.
+
+    Args:
+        specs: One `load_map` spec per map (paths, ``"default"``, ``"procedural:key=value,..."``).
+        **kwargs: Passed to every `load_map` call (cache_dir, loader arguments).
+
+    Raises:
+        MapError: `specs` is a single string or empty (the message shows what was given), or a
+            map fails to load (`load_map`'s error, which names the spec).
+    """
+    if isinstance(specs, (str, os.PathLike, RoadMap)) or not len(specs):
+        raise MapError(
+            f"map.specs: expected a non-empty list of map specs such as [default, 'procedural:seed=3'], "
+            f"got {specs!r}"
+        )
+    return [load_map(spec, **kwargs) for spec in specs]
