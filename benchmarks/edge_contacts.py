@@ -23,21 +23,15 @@ def run(
 ) -> dict[str, Any]:
     """Classified road-edge onsets of `policy` on `map_name` (the shipped run's env otherwise)."""
     from selfplaydrive import pretrained
-    from selfplaydrive.builder import build_env, compose
+    from selfplaydrive.builder import build_env
     from selfplaydrive.eval.edge_contacts import edge_contacts
-    from selfplaydrive.policies import is_builtin, load_run_config, make_policy
+    from selfplaydrive.policies import find_run_config, is_builtin, make_policy
     from selfplaydrive.pretrained import resolve_spec
-    from selfplaydrive.scenario.spawner import without_curricula
 
-    cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
-    cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
-    cfg.map = compose("train", [f"map={map_name}"]).map
-    cfg.env.num_threads = 1
-    if agents is not None:
-        cfg.spawner.num_agents = int(agents)
-    without_curricula(cfg.spawner)  # turn-lane starts and worlds: training, not the protocol
-    env = build_env(cfg)
     builtin = is_builtin(resolve_spec(policy))
+    own = None if builtin or policy == pretrained.NAME else find_run_config(policy)
+    cfg = pretrained.evaluation_config(map_name, agents, obs_from=own)  # a candidate: its own obs sizes
+    env = build_env(cfg)
     driver = make_policy(policy, env, **({} if builtin else {"deterministic": greedy}))
     start = time.perf_counter()
     table = edge_contacts(env, driver, steps, seed=seed)

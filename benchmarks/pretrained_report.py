@@ -67,22 +67,13 @@ def completion_eval(
     import torch
 
     from selfplaydrive import pretrained
-    from selfplaydrive.builder import build_env, build_model, compose, instantiate
-    from selfplaydrive.policies import find_run_config, load_checkpoint, load_run_config
-    from selfplaydrive.scenario.spawner import without_curricula
+    from selfplaydrive.builder import build_env, build_model, instantiate
+    from selfplaydrive.policies import find_run_config, load_checkpoint
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
 
-    cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
-    own = find_run_config(checkpoint)
-    if own is not None:  # a candidate trained with other observation sizes sees its own
-        cfg.obs = load_run_config(own).obs
-    cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
-    cfg.map = compose("train", [f"map={map_name}"]).map
-    cfg.env.num_threads = 1
-    if agents is not None:
-        cfg.spawner.num_agents = int(agents)
-    without_curricula(cfg.spawner)  # turn-lane starts and worlds: training, not the protocol
+    # a candidate trained with other observation sizes sees its own
+    cfg = pretrained.evaluation_config(map_name, agents, obs_from=find_run_config(checkpoint))
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
     model = build_model(cfg, env)

@@ -169,3 +169,22 @@ def test_evaluations_switch_the_training_curricula_off():
     off = without_curricula({"num_agents": 8, "turn_lane_worlds": 0.25})
     assert off == {"num_agents": 8, "turn_lane_worlds": 0.0}
     assert set(CURRICULUM_OPTIONS) == {"turn_lane_starts", "turn_lane_worlds"}
+
+
+def test_evaluation_config_sets_up_the_papers_protocol(tmp_path):
+    from omegaconf import OmegaConf
+
+    from selfplaydrive.policies import load_run_config
+
+    run = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
+    cfg = pretrained.evaluation_config("default", agents=32)
+    assert cfg.reward.mode == "eval" and cfg.env.num_threads == 1 and cfg.spawner.num_agents == 32
+    assert cfg.spawner.turn_lane_worlds == 0.0 and cfg.spawner.turn_lane_starts == 0
+    assert cfg.map.spec == "default"
+    kept = pretrained.evaluation_config()  # the run's own maps and agents
+    assert OmegaConf.to_container(kept.map) == OmegaConf.to_container(run.map)
+    assert kept.spawner.num_agents == run.spawner.num_agents
+    other = OmegaConf.to_container(run)
+    other["obs"]["max_road"] = 17
+    (tmp_path / "resolved_config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(other)))
+    assert pretrained.evaluation_config(obs_from=tmp_path / "resolved_config.yaml").obs.max_road == 17

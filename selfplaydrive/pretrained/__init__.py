@@ -36,6 +36,7 @@ __all__ = [
     "RUN_CONFIG",
     "build_env",
     "checkpoint_path",
+    "evaluation_config",
     "layout_signature",
     "load_metadata",
     "resolve_spec",
@@ -128,3 +129,37 @@ def build_env(
     if maps is not None:
         overrides["maps"] = maps
     return build(cfg, **overrides)
+
+
+def evaluation_config(
+    map_name: str | None = None,
+    agents: int | None = None,
+    obs_from: str | os.PathLike[str] | None = None,
+    folder: Path = FOLDER,
+) -> Any:
+    """The shipped run's config (`resolved_config.yaml`) set up for the paper's evaluation
+    protocol (section 5): the fixed evaluation coefficients (`reward.mode: eval`), the training
+    curricula of its spawner off (`scenario.spawner.without_curricula`), one env thread.
+
+    Args:
+        map_name: A `map` option (default, tartu ...) replacing the run's maps; None keeps them.
+        agents: Agents per world (None: the run's).
+        obs_from: A run config whose observation sizes replace the shipped run's (a candidate
+            checkpoint's own, `policies.find_run_config`); None keeps them.
+        folder: Where `resolved_config.yaml` lies (the package's folder by default).
+    """
+    from selfplaydrive.builder import compose
+    from selfplaydrive.policies import load_run_config
+    from selfplaydrive.scenario.spawner import without_curricula
+
+    cfg = load_run_config(Path(folder) / RUN_CONFIG)
+    if obs_from is not None:
+        cfg.obs = load_run_config(obs_from).obs
+    cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
+    if map_name is not None:
+        cfg.map = compose("train", [f"map={map_name}"]).map
+    cfg.env.num_threads = 1
+    if agents is not None:
+        cfg.spawner.num_agents = int(agents)
+    without_curricula(cfg.spawner)  # turn-lane starts and worlds: training, not the protocol
+    return cfg
