@@ -54,6 +54,7 @@ CONTEXTS = {
     ("map", "procedural"): ["map.size=400"],  # a small town: each perturbation generates one
     ("map", "file"): [f"map.spec={DEFAULT_NPZ}"],
     ("map", "tartu"): [],
+    ("map", "several"): [f"map.specs=[{DEFAULT_NPZ},'{SMALL_TOWN}']"],
 }
 DEFAULT_OPTIONS = {
     ("spawner", "paper"),
@@ -119,6 +120,7 @@ KEY_SETTINGS = {
 # candidates equal to the current value are skipped.
 SPECIAL = {
     "map.spec": [SMALL_TOWN, DEFAULT_NPZ],
+    "map.specs": [[SMALL_TOWN], [DEFAULT_NPZ]],
     "map.size": [500.0],
     "map.num_roundabouts": [0, 2],
     "spawner.static_count": [[3, 6]],
