@@ -63,6 +63,19 @@ def test_same_seed_same_run_and_another_seed_differs(tmp_path):
     assert any(not torch.equal(p, params(c)[k]) for k, p in params(a).items())
     summary = json.loads((a / "eval.json").read_text())
     assert summary["protocol"] == "training_distribution" and summary["actions"] == "sampled"
+    # the same worlds again under the paper's evaluation protocol (trainer.eval_fixed_coefficients)
+    fixed = summary["fixed_eval_coefficients"]
+    assert fixed["protocol"] == "fixed_eval_coefficients" and fixed["actions"] == "sampled"
+    assert "agent_episodes" in fixed
+
+
+def test_the_paper_protocol_evaluation_is_optional_and_not_repeated(tmp_path):
+    off = train(tmp_path / "off", 1, "trainer.eval_fixed_coefficients=false")
+    assert "fixed_eval_coefficients" not in json.loads((off / "eval.json").read_text())
+    # trained under the fixed coefficients already: one evaluation, which names that protocol
+    fixed = json.loads((train(tmp_path / "fixed", 1, "reward=eval") / "eval.json").read_text())
+    assert fixed["protocol"] == "fixed_eval_coefficients"
+    assert "fixed_eval_coefficients" not in fixed
 
 
 def test_resume_from_folder_and_checkpoint_matches_an_uninterrupted_run(tmp_path):

@@ -250,11 +250,7 @@ class PaperSpawner:
         self.pedestrians = pedestrians or PedestrianSampler()
         self.lights = lights or LightSampler()
         self.turn_lane_starts, self.turn_lane_worlds = int(turn_lane_starts), float(turn_lane_worlds)
-        self._turn_starts = None
-        if self.turn_lane_starts or self.turn_lane_worlds:
-            self._turn_starts = TurnLaneStarts(
-                min_agent_distance=self.min_agent_distance, static_gap=self.static_gap
-            )
+        self._turn_starts: TurnLaneStarts | None = None  # built when first used
         # spawn shortfalls (worlds that got fewer than num_agents agents): the first one per map
         # warns, every one is counted here
         self.shortfalls: dict[str, int] = {}
@@ -300,7 +296,9 @@ class PaperSpawner:
         n = len(lane)
         self._waypoints(sc, index, lane, s, rng)
         veh_xy, veh_r, still = self._statics(sc, index, box, rng, n)
-        if self._turn_starts is not None and self._move_to_turn_starts(sc, road_map, rng):
+        # the options, not the table, decide: `scenario.protocol.paper_protocol` turns them off
+        # on a built spawner, which then draws exactly what one built with them off draws
+        if (self.turn_lane_starts or self.turn_lane_worlds) and self._move_to_turn_starts(sc, road_map, rng):
             veh_xy[:n] = sc.agent_xy[:n]  # the pedestrians keep clear of the moved agents
         peds = self.pedestrians.sample(
             rng, index.crossings, index.crosswalks, box, self.num_pedestrians, veh_xy, veh_r, still
@@ -318,7 +316,10 @@ class PaperSpawner:
     def _move_to_turn_starts(self, sc: Scenario, road_map: RoadMap, rng: np.random.Generator) -> int:
         """Turn-lane starts (`scenario.turn_starts`): a whole turn-lane world with probability
         `turn_lane_worlds` (one draw, only when it is > 0), else `turn_lane_starts` agents."""
-        assert self._turn_starts is not None
+        if self._turn_starts is None:
+            self._turn_starts = TurnLaneStarts(
+                min_agent_distance=self.min_agent_distance, static_gap=self.static_gap
+            )
         if self.turn_lane_worlds > 0 and rng.random() < self.turn_lane_worlds:
             return self._turn_starts.apply(sc, road_map, rng, self.num_agents, clear=True)
         return self._turn_starts.apply(sc, road_map, rng, self.turn_lane_starts)

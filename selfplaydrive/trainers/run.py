@@ -6,7 +6,8 @@ Run folder layout (rank 0 writes the shared files; every rank its own checkpoint
     tb/                TensorBoard event files (losses, SPS, returns, reward terms, events/km);
                        with logger=jsonl metrics.jsonl instead, with logger=none nothing
     checkpoints/       ckpt_<update>.pt (periodic, pruned), final.pt
-    eval.json          the final evaluation summary (also printed)
+    eval.json          the final evaluation summary (also printed); with eval_fixed_coefficients
+                       also under the paper's protocol, key fixed_eval_coefficients
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
+from selfplaydrive.scenario.protocol import has_protocol, paper_protocol, uses_paper_coefficients
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.config import PPOConfig
 from selfplaydrive.trainers.ppo.dist import check_resume_agrees
@@ -113,9 +115,7 @@ def train_run(
         trainer.save(run_dir / "checkpoints" / ckpt.final_name(trainer.dist.rank))
         summary: dict[str, object] = {}
         if cfg.eval_episodes:
-            seed = cfg.seed + EVAL_SEED_OFFSET + trainer.dist.rank
-            summary = trainer.evaluate(cfg.eval_episodes, cfg.eval_max_steps, cfg.eval_deterministic, seed)
-            summary.update(eval_protocol(env, cfg.eval_deterministic))
+            summary = final_evaluation(trainer, env, cfg)
             if main:
                 write_summary(run_dir, summary, logger)
     finally:
@@ -225,6 +225,25 @@ def resolve_resume(resume: bool | str | Path, run_dir: str | Path, rank: int = 0
     return path, owner
 
 
+def final_evaluation(trainer: PPOTrainer, env, cfg: PPOConfig) -> dict[str, object]:
+    """The end-of-training evaluation: `cfg.eval_episodes` world episodes under the env's own
+    coefficient draws and, with `cfg.eval_fixed_coefficients`, the same worlds again under the
+    paper's evaluation protocol (`scenario.protocol.paper_protocol`), nested under the key
+    "fixed_eval_coefficients" (skipped for a spawner without a conditioning sampler). Each
+    summary records its protocol (`eval_protocol`)."""
+    seed = cfg.seed + EVAL_SEED_OFFSET + trainer.dist.rank
+    args = (cfg.eval_episodes, cfg.eval_max_steps, cfg.eval_deterministic, seed)
+    summary: dict[str, object] = trainer.evaluate(*args)
+    summary.update(eval_protocol(env, cfg.eval_deterministic))
+    spawner = getattr(env, "spawner", None)
+    if cfg.eval_fixed_coefficients and has_protocol(spawner) and not uses_paper_coefficients(spawner):
+        with paper_protocol(spawner):  # evaluate() resets every world inside the block
+            fixed = trainer.evaluate(*args)
+            fixed.update(eval_protocol(env, cfg.eval_deterministic))
+        summary["fixed_eval_coefficients"] = fixed
+    return summary
+
+
 def eval_protocol(env, deterministic: bool) -> dict[str, str]:
     """How the final evaluation chose its reward coefficients and actions (recorded in eval.json).
 
@@ -234,8 +253,7 @@ def eval_protocol(env, deterministic: bool) -> dict[str, str]:
     "training_distribution" (random draws per agent, as in training). Not the protocol of
     `selfplaydrive eval`, which builds its own scenarios.
     """
-    conditioning = getattr(getattr(env, "spawner", None), "conditioning", None)
-    fixed = getattr(conditioning, "mode", None) == "eval"
+    fixed = uses_paper_coefficients(getattr(env, "spawner", None))
     return {
         "protocol": "fixed_eval_coefficients" if fixed else "training_distribution",
         "actions": "greedy" if deterministic else "sampled",
@@ -281,12 +299,21 @@ def write_summary(run_dir: Path, summary: dict[str, object], logger: Logger | No
     """Print the short evaluation summary (with its protocol, see `eval_protocol`) and save
     every metric to `run_dir/eval.json`."""
     _write_json(run_dir / "eval.json", summary)
-    shown = ", ".join(
-        f"{k} {summary[k]:.3g}" for k in SUMMARY_KEYS if k in summary and math.isfinite(summary[k])
-    )
+    shown = _summary_line(summary)
     how = " ".join(f"{k} {summary[k]}" for k in ("protocol", "actions") if k in summary)
     line = f"evaluation: {shown} ({how or 'protocol not recorded'}; full summary in {run_dir / 'eval.json'})"
     (logger.text if logger is not None else print)(line)
+    fixed = summary.get("fixed_eval_coefficients")
+    if isinstance(fixed, Mapping):
+        how = f"fixed evaluation coefficients, {fixed.get('actions')} actions"
+        line = f"evaluation, paper protocol: {_summary_line(fixed)} ({how})"
+        (logger.text if logger is not None else print)(line)
+
+
+def _summary_line(summary: Mapping[str, object]) -> str:
+    return ", ".join(
+        f"{k} {summary[k]:.3g}" for k in SUMMARY_KEYS if k in summary and math.isfinite(summary[k])
+    )
 
 
 def run_info(env, model: nn.Module, trainer: PPOTrainer) -> dict[str, object]:

@@ -46,7 +46,6 @@ with requires_extra("sb3"):
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 EVAL_SEED_OFFSET = 1_000_003  # evaluation worlds never repeat the training seed's worlds
-SUMMARY_KEYS = ("episodes", "waypoint_completion", "collision_rate", "offroad_rate", "red_light_rate")
 DEVICES = ("auto", "cpu", "cuda")
 
 
@@ -295,7 +294,7 @@ class SB3Trainer:
             from stable_baselines3.common.logger import Logger as SB3Logger
 
         from selfplaydrive.env import SB3VecEnv
-        from selfplaydrive.trainers.run import eval_protocol, make_logger
+        from selfplaydrive.trainers.run import eval_protocol, make_logger, write_summary
 
         run_dir = Path(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -331,12 +330,7 @@ class SB3Trainer:
                 self.seed + EVAL_SEED_OFFSET,
             )
             summary.update(eval_protocol(env, self.eval_deterministic))
-            _write_json(run_dir / "eval.json", summary)
-            shown = ", ".join(
-                f"{k} {summary[k]:.3g}" for k in SUMMARY_KEYS if math.isfinite(summary.get(k, math.nan))
-            )
-            how = f"protocol {summary['protocol']} actions {summary['actions']}"
-            print(f"evaluation: {shown} ({how}; full summary in {run_dir / 'eval.json'})")
+            write_summary(run_dir, summary)
         return {"agent_steps": int(model.num_timesteps), "model_path": str(model_path), "eval": summary}
 
 

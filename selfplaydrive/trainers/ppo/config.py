@@ -128,6 +128,12 @@ class PPOConfig:
     eval_deterministic: bool = False
     """Final evaluation takes the most likely action instead of sampling."""
 
+    eval_fixed_coefficients: bool = True
+    """Evaluate a second time, on the same worlds, under the paper's evaluation protocol
+    (section 5: every reward coefficient at its fixed evaluation value, training curricula off;
+    `eval.json` key `fixed_eval_coefficients`). Skipped when training already uses the fixed
+    coefficients (`reward=eval`)."""
+
     progress_bar: bool = True
     """Show a tqdm progress bar with SPS and ETA (rank 0 only)."""
 
