@@ -147,7 +147,7 @@ def test_unknown_option_lists_choices():
     [
         ("train", "logger=nope", "valid options for 'logger': jsonl, none, tensorboard"),
         ("train", "logger.subdirr=x", "valid keys under 'logger': _partial_, _target_, flush_secs, subdir"),
-        ("train", "model=nope", "valid options for 'model': deepsets, deepsets_laptop, transformer"),
+        ("train", "model=nope", "valid options for 'model': deepsets, deepsets_laptop, deepsets_small"),
         ("train", "trainer=nope", "valid options for 'trainer': ppo, ppo_laptop, sb3"),
         ("train", "experiment=nope", "valid options for 'experiment': ablate_collision, ablate_friction"),
         ("eval", "eval=nope", "valid options for 'eval': diversity, paper, quick"),
@@ -221,7 +221,12 @@ def test_every_model_option_instantiates(option):
     model = build_model(cfg, _stub_env(cfg))
     assert type(model).__name__ == cfg.model._target_.rsplit(".", 1)[1]
     params = sum(p.numel() for p in model.parameters())
-    expected = {"deepsets": 596_757, "deepsets_laptop": 151_957, "transformer": 638_229}
+    expected = {
+        "deepsets": 596_757,
+        "deepsets_laptop": 151_957,
+        "deepsets_small": 39_381,
+        "transformer": 638_229,
+    }
     assert params == expected[option]  # the configs' comments
     tiny = compose("train", [f"model={option}", "obs.max_objects=3", "obs.max_road=5"])
     model = build_model(tiny, _stub_env(tiny))

@@ -19,6 +19,7 @@ from selfplaydrive.trainers.ppo.logging import WALL_CLOCK_TAGS  # noqa: E402
 UPDATE = 256
 TINY = [
     "env.num_worlds=1",
+    "spawner.num_agents=32",
     "trainer.rollout_length=8",
     "trainer.anneal_lr=false",
     "trainer.checkpoint_interval=1",

@@ -32,6 +32,7 @@ RANKS = (0, 1)
 UPDATE = 256
 TINY = [
     "env.num_worlds=1",
+    "spawner.num_agents=32",
     "trainer.rollout_length=8",
     "trainer.anneal_lr=false",
     "trainer.torch_threads=1",
