@@ -64,7 +64,7 @@ def test_same_seed_same_run_and_another_seed_differs(tmp_path):
     assert any(not torch.equal(p, params(c)[k]) for k, p in params(a).items())
     summary = json.loads((a / "eval.json").read_text())
     assert summary["protocol"] == "training_distribution" and summary["actions"] == "sampled"
-    # the same worlds again under the paper's evaluation protocol (trainer.eval_fixed_coefficients)
+    # the same seed again under the paper's evaluation protocol (trainer.eval_fixed_coefficients)
     fixed = summary["fixed_eval_coefficients"]
     assert fixed["protocol"] == "fixed_eval_coefficients" and fixed["actions"] == "sampled"
     assert "agent_episodes" in fixed

@@ -227,7 +227,7 @@ def resolve_resume(resume: bool | str | Path, run_dir: str | Path, rank: int = 0
 
 def final_evaluation(trainer: PPOTrainer, env, cfg: PPOConfig) -> dict[str, object]:
     """The end-of-training evaluation: `cfg.eval_episodes` world episodes under the env's own
-    coefficient draws and, with `cfg.eval_fixed_coefficients`, the same worlds again under the
+    coefficient draws and, with `cfg.eval_fixed_coefficients`, again from the same seed under the
     paper's evaluation protocol (`scenario.protocol.paper_protocol`), nested under the key
     "fixed_eval_coefficients" (skipped for a spawner without a conditioning sampler). Each
     summary records its protocol (`eval_protocol`)."""

@@ -129,10 +129,11 @@ class PPOConfig:
     """Final evaluation takes the most likely action instead of sampling."""
 
     eval_fixed_coefficients: bool = True
-    """Evaluate a second time, on the same worlds, under the paper's evaluation protocol
+    """Evaluate a second time, from the same seed, under the paper's evaluation protocol
     (section 5: every reward coefficient at its fixed evaluation value, training curricula off;
     `eval.json` key `fixed_eval_coefficients`). Skipped when training already uses the fixed
-    coefficients (`reward=eval`)."""
+    coefficients (`reward=eval`). Each world's first episode starts from the same layout as in
+    the first evaluation; coefficients, hidden gains and later episodes are drawn anew."""
 
     progress_bar: bool = True
     """Show a tqdm progress bar with SPS and ETA (rank 0 only)."""
