@@ -70,6 +70,11 @@ class PPOConfig:
     norm_adv: bool = True
     """Normalise advantages to zero mean, unit std per minibatch (active slots only)."""
 
+    norm_returns: bool = False
+    """Divide every reward by the running standard deviation of the discounted return before
+    GAE (`ppo/returns.py`), so that values and their clipping live near unit scale whatever the
+    reward weights. Logged returns and evaluations keep the env's own rewards."""
+
     ent_coef: float = 0.005
     """Weight of the entropy bonus (subtracted from the loss)."""
 
@@ -166,6 +171,8 @@ class PPOConfig:
             _bad("target_kl", self.target_kl, "None or a number > 0")
         if not isinstance(self.host_register, bool):
             _bad("host_register", self.host_register, "true or false")
+        if not isinstance(self.norm_returns, bool):
+            _bad("norm_returns", self.norm_returns, "true or false")
         if not isinstance(self.compile, bool):
             _bad("compile", self.compile, "true or false")
         if self.precision not in PRECISIONS:

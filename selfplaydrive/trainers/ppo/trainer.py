@@ -30,6 +30,7 @@ from selfplaydrive.trainers.ppo.dist import DistInfo, all_reduce_mean, init_dist
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 from selfplaydrive.trainers.ppo.logging import RunLogger
 from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
+from selfplaydrive.trainers.ppo.returns import ReturnScaler
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
 from selfplaydrive.trainers.ppo.uploads import Uploader
 
@@ -153,6 +154,9 @@ class PPOTrainer:
         self.storage = RolloutStorage.allocate(
             config.rollout_length, self.num_slots, env.layout.obs_dim, len(nvec), self.device
         )
+        self.return_scaler = (
+            ReturnScaler(self.num_slots, config.gamma, self.device) if config.norm_returns else None
+        )
         self.tracker = EpisodeTracker(env)
         self.recent: deque[dict[str, object]] = deque(maxlen=RECENT_WORLD_EPISODES)
         self.recent_returns: deque[float] = deque(maxlen=RECENT_WORLD_EPISODES * env.agents_per_world)
@@ -271,8 +275,11 @@ class PPOTrainer:
         obs = self._to_device(self.env.observations, "obs")
         with self.autocast():
             _, next_value, _ = self.model(obs, self.state, self.next_start)
+        rewards = s.rewards
+        if self.return_scaler is not None:
+            rewards = self.return_scaler.scale(s.rewards, s.active, s.episode_start, self.dist)
         s.advantages, s.returns = compute_gae(
-            s.rewards,
+            rewards,
             s.values,
             next_value.float(),
             s.active,
@@ -329,6 +336,8 @@ class PPOTrainer:
         out = {f"losses/{k}": v / max(count, 1) for k, v in sums.items()}
         out["losses/explained_variance"] = self._explained_variance()
         out["charts/learning_rate"] = self.optimizer.param_groups[0]["lr"]
+        if self.return_scaler is not None:
+            out["charts/return_scale"] = self.return_scaler.std
         return out
 
     def _live_slots(self) -> Tensor:
@@ -455,6 +464,7 @@ class PPOTrainer:
             "tracker": self.tracker.state_dict(),
             "recent": (list(self.recent), list(self.recent_returns)),
             "env": ckpt.env_state(self.env),
+            "return_scaler": None if self.return_scaler is None else self.return_scaler.state_dict(),
             "callbacks": [
                 {"name": callback_name(c), "state": c.state_dict() if hasattr(c, "state_dict") else None}
                 for c in self.callbacks
@@ -478,6 +488,8 @@ class PPOTrainer:
             self.recent_returns.clear()
             self.recent.extend(payload["recent"][0])
             self.recent_returns.extend(payload["recent"][1])
+        if self.return_scaler is not None and payload.get("return_scaler") is not None:
+            self.return_scaler.load_state_dict(payload["return_scaler"])
         if "rng" in payload:
             ckpt.set_rng_state(payload["rng"])
         self._load_callbacks(payload.get("callbacks", []))
