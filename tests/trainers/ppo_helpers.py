@@ -12,10 +12,12 @@ import torch
 from torch import nn
 
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, compile_map
+from selfplaydrive.models import DeepSetsModel
 from selfplaydrive.models.common import reset_state
 from selfplaydrive.obs.config import ObsConfig
 from selfplaydrive.scenario.types import COEFF_NAMES, Scenario
 from selfplaydrive.sim import VecEnv
+from selfplaydrive.trainers import PPOConfig, PPOTrainer
 
 ROAD_LENGTH = 600.0  # [m]
 LANE_WIDTH = 3.5  # [m]
@@ -196,3 +198,26 @@ def load_benchmark(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+# small PPO settings for the checkpoint and resume tests: a checkpoint every 2 updates
+RESUME_CFG = dict(
+    total_steps=10_000,
+    rollout_length=12,
+    num_minibatches=2,
+    num_epochs=2,
+    device="cpu",
+    progress_bar=False,
+    checkpoint_interval=2,
+    keep_checkpoints=1,
+    torch_threads=1,
+)
+
+
+def resume_trainer(run_dir, init_seed: int, **overrides) -> PPOTrainer:
+    """A small Deep Sets trainer on the lane task whose init depends on `init_seed`, for
+    checkpoint and resume tests (a load must override all of it)."""
+    torch.manual_seed(init_seed)  # another init: the checkpoint must override all of it
+    env = lane_env(num_worlds=3, seed=init_seed, episode_length=1.5)
+    model = DeepSetsModel(env.layout, input_size=16, hidden_size=32, lstm_size=32)
+    return PPOTrainer(env, model, PPOConfig(**dict(RESUME_CFG, **overrides)), run_dir)

@@ -8,44 +8,32 @@ import shutil
 import numpy as np
 import pytest
 import torch
+from ppo_helpers import RESUME_CFG as CFG
 from ppo_helpers import lane_env
+from ppo_helpers import resume_trainer as make_trainer
 
 from selfplaydrive.errors import CheckpointError, ConfigError
 from selfplaydrive.models import DeepSetsModel
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 
-CFG = dict(
-    total_steps=10_000,
-    rollout_length=12,
-    num_minibatches=2,
-    num_epochs=2,
-    device="cpu",
-    progress_bar=False,
-    checkpoint_interval=2,
-    keep_checkpoints=1,
-    torch_threads=1,
-)
 
-
-def make_trainer(run_dir, init_seed: int) -> PPOTrainer:
-    torch.manual_seed(init_seed)  # another init: the checkpoint must override all of it
-    env = lane_env(num_worlds=3, seed=init_seed, episode_length=1.5)
-    model = DeepSetsModel(env.layout, input_size=16, hidden_size=32, lstm_size=32)
-    return PPOTrainer(env, model, PPOConfig(**CFG), run_dir)
-
-
-def test_resume_is_bit_identical(tmp_path):
-    a = make_trainer(tmp_path / "a", 0)
+@pytest.mark.parametrize("norm_returns", [False, True])
+def test_resume_is_bit_identical(tmp_path, norm_returns):
+    a = make_trainer(tmp_path / "a", 0, norm_returns=norm_returns)
     a.train(2)  # autoresets, truncations and terminations happen within these rollouts
     path = ckpt.latest(tmp_path / "a" / "checkpoints")
     assert path is not None and path.name == ckpt.checkpoint_name(2)
     path = shutil.copy(path, tmp_path / "after_2.pt")  # the next periodic save prunes it
     a.train(2)
-    b = make_trainer(tmp_path / "b", 1)
+    b = make_trainer(tmp_path / "b", 1, norm_returns=norm_returns)
     b.load(path)
     assert b.update_idx == 2
     b.train(2)
+    if norm_returns:  # the return scaler's statistics travel in the checkpoint
+        sa, sb = a.return_scaler, b.return_scaler
+        assert (sa.count, sa.mean, sa.m2) == (sb.count, sb.mean, sb.m2)
+        assert torch.equal(sa.running, sb.running)
     for (name, pa), pb in zip(a.model.state_dict().items(), b.model.state_dict().values(), strict=True):
         assert torch.equal(pa, pb), name
     for name, buf in a.env.buffers.items():
