@@ -10,7 +10,7 @@ import torch
 from ppo_helpers import resume_trainer
 
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.trainers import PPOConfig, PPOTrainer
+from selfplaydrive.trainers import PPOConfig
 from selfplaydrive.trainers.ppo.returns import ReturnScaler
 
 
@@ -83,12 +83,8 @@ def test_first_rollout_without_spread_divides_by_one():
     assert torch.equal(out, rewards)
 
 
-def make_trainer(run_dir, init_seed: int) -> PPOTrainer:
-    return resume_trainer(run_dir, init_seed, norm_returns=True)
-
-
 def test_trainer_scales_the_rewards_it_feeds_to_gae_and_logs_the_scale(tmp_path):
-    trainer = make_trainer(None, 0)
+    trainer = resume_trainer(None, 0, norm_returns=True)
     metrics = trainer.train(1)
     scaler = trainer.return_scaler
     assert scaler is not None and scaler.count == int(trainer.storage.active.sum())
