@@ -112,6 +112,14 @@ class PPOConfig:
     with a warm one), and the main job's updates then ran only 1.02x faster on a 2-core CPU
     (docs/training.md, "Speed")."""
 
+    overlap_collection: bool = False
+    """Collect the next rollout in a second thread while the current one trains, so that the
+    simulator and the policy's inference run on one core while the update runs on another. The
+    next rollout is collected by the policy as it was before the running update (one update
+    behind the learner; PPO's ratio to the stored log-probabilities accounts for it). The
+    schedule is fixed, so a seed gives the same run every time; it is another run than with
+    false. Not under torchrun (the collector's collectives would race the update's)."""
+
     deterministic: bool = False
     """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""
 
@@ -173,6 +181,8 @@ class PPOConfig:
             _bad("host_register", self.host_register, "true or false")
         if not isinstance(self.norm_returns, bool):
             _bad("norm_returns", self.norm_returns, "true or false")
+        if not isinstance(self.overlap_collection, bool):
+            _bad("overlap_collection", self.overlap_collection, "true or false")
         if not isinstance(self.compile, bool):
             _bad("compile", self.compile, "true or false")
         if self.precision not in PRECISIONS:

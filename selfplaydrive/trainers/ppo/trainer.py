@@ -8,6 +8,7 @@ Layout of the file, CleanRL style: setup, ROLLOUT, ADVANTAGES, UPDATE, bookkeepi
 
 from __future__ import annotations
 
+import copy
 import inspect
 import os
 import time
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from selfplaydrive._optional import requires_extra
-from selfplaydrive.errors import CheckpointError
+from selfplaydrive.errors import CheckpointError, ConfigError
 from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
@@ -30,6 +31,7 @@ from selfplaydrive.trainers.ppo.dist import DistInfo, all_reduce_mean, init_dist
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 from selfplaydrive.trainers.ppo.logging import RunLogger
 from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
+from selfplaydrive.trainers.ppo.overlap import Prefetch, make_actor
 from selfplaydrive.trainers.ppo.returns import ReturnScaler
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
 from selfplaydrive.trainers.ppo.uploads import Uploader
@@ -131,6 +133,15 @@ class PPOTrainer:
         if config.deterministic:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
+        self.overlap = config.overlap_collection
+        if self.overlap and self.dist.enabled:
+            raise ConfigError(
+                f"PPOConfig.overlap_collection = True under torchrun (world size {self.dist.world_size}): "
+                "expected false; the collector thread's collectives would race the update's"
+            )
+        # the policy that collects: the model itself, or with overlap_collection its copy of one
+        # update ago (ppo/overlap.py)
+        self.actor = make_actor(self.model) if self.overlap else self.model
         self.evaluator = wrap(self.model, self.dist, self.device)
         self.compiled = config.compile and compile_model(self.model)
         # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
@@ -151,9 +162,15 @@ class PPOTrainer:
         self.num_slots = env.num_agents
         self.slots_per_update = config.rollout_length * self.num_slots
         self.total_updates = max(1, config.total_steps // self.slots_per_update)
-        self.storage = RolloutStorage.allocate(
-            config.rollout_length, self.num_slots, env.layout.obs_dim, len(nvec), self.device
-        )
+        sizes = (config.rollout_length, self.num_slots, env.layout.obs_dim, len(nvec), self.device)
+        self.storage = RolloutStorage.allocate(*sizes)
+        # overlap_collection: the rollout being collected while `storage` trains, and the state
+        # of the pipeline between updates (see _overlapped_update)
+        self.spare = RolloutStorage.allocate(*sizes) if self.overlap else None
+        self._pending = False  # `storage` holds a collected rollout not trained on yet
+        self._snapshot: dict[str, object] | None = None  # collector state before that rollout
+        self._actor_current = False  # the actor holds the weights of the update before
+        self._recollect = False  # resumed: the next collection repeats one counted and logged
         self.return_scaler = (
             ReturnScaler(self.num_slots, config.gamma, self.device) if config.norm_returns else None
         )
@@ -194,8 +211,11 @@ class PPOTrainer:
     # ---------------------------------------------------------------------------------------
     # ROLLOUT: act in every slot of every world, straight from the env's buffers
     @torch.inference_mode()
-    def act(self, deterministic: bool = False) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        """Policy step on the current observations; advances the recurrent state.
+    def act(
+        self, deterministic: bool = False, net: nn.Module | None = None
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """Policy step of `net` (default: the actor) on the current observations; advances the
+        recurrent state.
 
         Only the slots that act (`env.masks`) are evaluated: with a third of the slots acting
         (experiment=laptop) the others would cost two thirds of the inference for outputs that
@@ -216,7 +236,7 @@ class PPOTrainer:
         if len(acting):
             state = _index(self.state, rows)
             with self.autocast():
-                logits, value, state = self.model(obs[rows], state, self.next_start[rows])
+                logits, value, state = (net or self.actor)(obs[rows], state, self.next_start[rows])
             logits = logits.float()
             sampled = sample_actions(logits, self.nvec, deterministic, generator=self.sample_gen)
             actions[rows] = sampled
@@ -227,9 +247,12 @@ class PPOTrainer:
         return obs, actions, logprobs, values, acted
 
     @torch.inference_mode()
-    def env_step(self, actions: Tensor, acted: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    def env_step(
+        self, actions: Tensor, acted: Tensor, net: nn.Module | None = None
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Step the env with `actions`; returns rewards, terminated, truncated (masked by `acted`)
-        and V(final observation) of the truncated slots (0 elsewhere)."""
+        and V(final observation) of the truncated slots (0 elsewhere; `net`'s value, default the
+        actor's)."""
         acted_np = self.env.masks.copy()
         # the only synchronisation per step; GPU work queued before it (storage writes) and
         # after it (uploads) overlaps the env step, which runs nogil on the CPU
@@ -245,15 +268,15 @@ class PPOTrainer:
             final_obs = torch.from_numpy(self.env.final_observations[ended]).to(self.device)
             no_start = torch.zeros(len(idx), dtype=torch.bool, device=self.device)
             with self.autocast():  # the state after step t continues into the final obs
-                _, v, _ = self.model(final_obs, _index(self.state, idx), no_start)
+                _, v, _ = (net or self.actor)(final_obs, _index(self.state, idx), no_start)
             final_values[idx] = v.float()
         masks = self._to_device(self.env.masks, "masks")
         self.next_start = masks & (~acted | term | trunc)
         return rewards, term, trunc, final_values
 
-    def collect(self) -> None:
-        """Fill the storage with one rollout."""
-        s, cfg = self.storage, self.config
+    def collect(self, storage: RolloutStorage | None = None) -> None:
+        """Fill `storage` (default: `self.storage`) with one rollout of the actor."""
+        s, cfg = storage or self.storage, self.config
         if self.needs_reset:
             self.reset_env(cfg.seed + self.dist.rank)
         s.initial_state = tuple(x.clone() for x in self.state)
@@ -270,11 +293,12 @@ class PPOTrainer:
     # ---------------------------------------------------------------------------------------
     # ADVANTAGES: GAE with V(final obs) at truncations, 0 at terminations, nothing across slots
     @torch.inference_mode()
-    def compute_advantages(self) -> None:
-        s, cfg = self.storage, self.config
+    def compute_advantages(self, storage: RolloutStorage | None = None) -> None:
+        """GAE of `storage` (default: `self.storage`), bootstrapped by the actor's value."""
+        s, cfg = storage or self.storage, self.config
         obs = self._to_device(self.env.observations, "obs")
         with self.autocast():
-            _, next_value, _ = self.model(obs, self.state, self.next_start)
+            _, next_value, _ = self.actor(obs, self.state, self.next_start)
         rewards = s.rewards
         if self.return_scaler is not None:
             rewards = self.return_scaler.scale(s.rewards, s.active, s.episode_start, self.dist)
@@ -377,13 +401,16 @@ class PPOTrainer:
         while self.update_idx < stop:
             ran = True
             t0, steps0 = time.perf_counter(), self.agent_steps
-            self.collect()
-            self.compute_advantages()
-            t1 = time.perf_counter()
-            metrics = self.update()
+            if self.overlap:
+                metrics, t_collect = self._overlapped_update()
+            else:
+                self.collect()
+                self.compute_advantages()
+                t_collect = time.perf_counter() - t0
+                metrics = self.update()
             self.update_idx += 1
-            t2 = time.perf_counter()
-            metrics.update(self._rates(self.agent_steps - steps0, t1 - t0, t2 - t0))
+            t_total = time.perf_counter() - t0
+            metrics.update(self._rates(self.agent_steps - steps0, t_collect, t_total))
             records, returns = self.tracker.pop()
             metrics.update(summarize(records, returns))
             metrics.update(self._recent(records, returns))
@@ -399,6 +426,53 @@ class PPOTrainer:
         if ran and self.update_idx >= self.total_updates:
             self._call("on_end", metrics)
         return metrics
+
+    def _overlapped_update(self) -> tuple[dict[str, float], float]:
+        """One update with `overlap_collection`; returns its metrics and the collection seconds.
+
+        Update k trains on rollout k while a second thread collects rollout k+1 with the
+        weights before update k (ppo/overlap.py). Between updates, also between `train()` calls,
+        the pipeline holds rollout k+1 (`_pending`); the run's last update collects nothing.
+        Without a rollout in hand (the first update, a resume) the update collects its own
+        first, with the weights the pipeline would have used.
+        """
+        t_collect = 0.0
+        if not self._pending:
+            start = time.perf_counter()
+            if not self._actor_current:  # a fresh start (or init_from): the model's own weights
+                self.actor.load_state_dict(self.model.state_dict())
+            self._collect_first()
+            t_collect = time.perf_counter() - start
+        self.actor.load_state_dict(self.model.state_dict())
+        self._actor_current = True
+        prefetch = None
+        if self.update_idx + 1 < self.total_updates:
+            self._snapshot = self._collector_state()  # what a checkpoint after this update holds
+            prefetch = Prefetch(lambda: (self.collect(self.spare), self.compute_advantages(self.spare)))
+        try:
+            metrics = self.update()
+        except BaseException:
+            if prefetch is not None:
+                prefetch.wait()  # never leave the collector writing behind a raised exception
+            raise
+        self._pending = prefetch is not None
+        if prefetch is not None:
+            t_collect += prefetch.result()
+            self.storage, self.spare = self.spare, self.storage
+        return metrics, t_collect
+
+    def _collect_first(self) -> None:
+        """Collect the rollout of the coming update before it (overlap_collection). After a
+        resume from a checkpoint written with a rollout in flight, that rollout is collected
+        again from the state saved before it: its steps were counted and its episodes logged
+        before the checkpoint, so they are not counted or logged twice."""
+        counters = (self.global_step, self.agent_steps)
+        self.collect()
+        self.compute_advantages()
+        if self._recollect:
+            self.global_step, self.agent_steps = counters
+            self.tracker.pop()
+            self._recollect = False
 
     def _call(self, hook: str, *args: object) -> list[object]:
         """Call `hook(self, *args)` on every callback that defines it; returns the results."""
@@ -417,6 +491,8 @@ class PPOTrainer:
         return {f"recent/{k}": window[k] for k in RECENT_KEYS if k in window}
 
     def _rates(self, agent_steps: int, t_collect: float, t_total: float) -> dict[str, float]:
+        if t_collect <= 0.0:  # overlap_collection: the run's last update collects nothing
+            return {}
         return {
             "sps": agent_steps * self.dist.world_size / t_total,
             "collect_sps": agent_steps / t_collect,
@@ -435,8 +511,8 @@ class PPOTrainer:
         records: list[dict[str, object]] = []
         returns: list[float] = []
         for _ in range(max_steps):
-            _, actions, _, _, acted = self.act(deterministic)
-            self.env_step(actions, acted)
+            _, actions, _, _, acted = self.act(deterministic, net=self.model)
+            self.env_step(actions, acted, net=self.model)
             r, g = self.tracker.pop()
             records += r
             returns += g
@@ -446,8 +522,13 @@ class PPOTrainer:
         return summarize(records, returns)
 
     def state_dict(self) -> dict[str, object]:
-        """Everything `load_state_dict` needs to continue exactly (see checkpoint.py)."""
-        return {
+        """Everything `load_state_dict` needs to continue exactly (see checkpoint.py).
+
+        With a rollout in flight (overlap_collection, inside `train`), the collecting side's
+        state is the one saved before that rollout, and `pending_rollout` says so: a resume
+        collects it again with the saved actor weights.
+        """
+        payload: dict[str, object] = {
             "config": self.config.to_dict(),
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
@@ -456,20 +537,33 @@ class PPOTrainer:
                 "global_step": self.global_step,
                 "agent_steps": self.agent_steps,
             },
-            "sample_gen": self.sample_gen.get_state(),
             "shuffle_gen": self.shuffle_gen.get_state(),
+            "recent": (list(self.recent), list(self.recent_returns)),
+        }
+        payload.update(self._snapshot if self._pending and self._snapshot else self._collector_state())
+        if self.overlap:
+            payload["actor"] = copy.deepcopy(self.actor.state_dict())
+            payload["pending_rollout"] = self._pending
+        return payload
+
+    def _collector_state(self) -> dict[str, object]:
+        """A copy of what collecting a rollout changes: env, recurrent state, generator of the
+        actions, episode tracker, return scaler and callbacks (`on_step`)."""
+        state = {
+            "sample_gen": self.sample_gen.get_state(),
             "recurrent": [s.cpu() for s in self.state],
             "next_start": self.next_start.cpu(),
             "needs_reset": self.needs_reset,
             "tracker": self.tracker.state_dict(),
-            "recent": (list(self.recent), list(self.recent_returns)),
-            "env": ckpt.env_state(self.env),
             "return_scaler": None if self.return_scaler is None else self.return_scaler.state_dict(),
             "callbacks": [
                 {"name": callback_name(c), "state": c.state_dict() if hasattr(c, "state_dict") else None}
                 for c in self.callbacks
             ],
         }
+        state = copy.deepcopy(state)  # on the CPU some entries are the live tensors
+        state["env"] = ckpt.env_state(self.env)  # a copy already
+        return state
 
     def load_state_dict(self, payload: dict[str, object]) -> None:
         self.model.load_state_dict(payload["model"])
@@ -493,6 +587,12 @@ class PPOTrainer:
         if "rng" in payload:
             ckpt.set_rng_state(payload["rng"])
         self._load_callbacks(payload.get("callbacks", []))
+        if self.overlap:
+            self._pending = False
+            self._actor_current = "actor" in payload
+            if self._actor_current:
+                self.actor.load_state_dict(payload["actor"])
+            self._recollect = bool(payload.get("pending_rollout", False))
 
     def _load_callbacks(self, saved: list[dict[str, object]]) -> None:
         """Restore the callbacks' states by position where the saved name matches (a callback
