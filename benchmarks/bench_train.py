@@ -115,9 +115,35 @@ def timed_env_step(env) -> list[float]:
     return total
 
 
+def one_overlapped_update(trainer, env_time: list[float]) -> dict[str, float]:
+    """One update with `trainer.overlap_collection` (the next rollout collected in a second
+    thread meanwhile): phases overlap, so `update` is the wall time and `collect_s` the
+    collector thread's own."""
+    steps0, env0 = trainer.agent_steps, env_time[0]
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    metrics = trainer.train(num_updates=1)
+    t1, cpu1 = time.perf_counter(), time.process_time()
+    steps = trainer.agent_steps - steps0
+    collect_s = steps / metrics["collect_sps"] if metrics.get("collect_sps") else float("nan")
+    env_s = env_time[0] - env0
+    return {
+        "agent_steps": steps,
+        "wall_s": t1 - t0,
+        "cpu_s": cpu1 - cpu0,
+        "collect_s": collect_s,
+        "env_step": env_s,
+        "policy": collect_s - env_s,
+        "advantages": 0.0,
+        "update": t1 - t0,
+    }
+
+
 def one_update(trainer, env_time: list[float]) -> dict[str, float]:
     """Run one PPO update; its agent-steps, wall and CPU seconds per phase."""
     import torch
+
+    if getattr(trainer, "overlap", False):
+        return one_overlapped_update(trainer, env_time)
 
     # device work is asynchronous: wait for it at each phase's end (a no-op on the CPU)
     sync = torch.cuda.synchronize if trainer.device.type == "cuda" else (lambda: None)

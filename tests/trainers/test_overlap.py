@@ -1,7 +1,7 @@
 """`PPOConfig.overlap_collection`: the next rollout is collected in a second thread during the
-update, by the weights before it (selfplaydrive/trainers/ppo/overlap.py). The schedule is
-fixed, so runs repeat bit for bit, split `train()` calls equal one call, and a checkpoint
-written with a rollout in flight resumes exactly."""
+update's last epoch, by the weights at its start (selfplaydrive/trainers/ppo/overlap.py). The
+schedule is fixed, so runs repeat bit for bit, split `train()` calls equal one call, and a
+checkpoint written with a rollout in flight resumes exactly."""
 
 from __future__ import annotations
 
@@ -74,22 +74,34 @@ def test_resume_from_a_checkpoint_written_with_a_rollout_in_flight(tmp_path):
     assert_same_run(a, b)
 
 
-def test_the_rollout_is_collected_by_the_weights_before_the_update(tmp_path):
-    """Update k trains on rollout k, which the weights before update k-1 collected: its stored
-    log-probabilities are those weights' and not the ones the update starts from."""
+def test_the_next_rollout_is_collected_by_the_weights_at_the_last_epochs_start(tmp_path):
+    """With 2 epochs x 2 minibatches, rollout k+1 is collected by the weights after the first
+    2 optimizer steps of update k: its stored log-probabilities are those weights', not those
+    at the start of update k or of update k+1."""
     t = overlapped(tmp_path / "t")
-    seen = []
-    update = t.update
+    steps, actor_weights, seen = [], [], []
+    step, load, update = t.optimizer.step, t.actor.load_state_dict, t.update
 
-    def recording_update():
+    def counting_step(*args, **kwargs):
+        steps.append(1)
+        return step(*args, **kwargs)
+
+    def recording_load(weights):
+        actor_weights.append((len(steps), copy.deepcopy(dict(weights))))
+        return load(weights)
+
+    def recording_update(*args, **kwargs):
         s = t.storage
         weights = copy.deepcopy(t.model.state_dict())
         rollout = (s.obs, s.actions, s.logprobs, s.active, s.episode_start)
         seen.append((weights, *(x.clone() for x in rollout), tuple(x.clone() for x in s.initial_state)))
-        return update()
+        return update(*args, **kwargs)
 
-    t.update = recording_update
+    t.optimizer.step, t.actor.load_state_dict, t.update = counting_step, recording_load, recording_update
     t.train(3)
+    # the initial weights (first rollout), then after 2, 6 and 10 optimizer steps (updates 0-2:
+    # the pipeline collects the fourth rollout before the call returns)
+    assert [n for n, _ in actor_weights] == [0, 2, 6, 10]
     model = copy.deepcopy(t.model)
 
     def logprobs_under(weights, k):
@@ -100,13 +112,13 @@ def test_the_rollout_is_collected_by_the_weights_before_the_update(tmp_path):
         lp, _ = log_prob_and_entropy(logits, actions, t.nvec)
         return lp[active]
 
-    for k in (1, 2):
+    for k in (0, 1, 2):
         stored = seen[k][3][seen[k][4]]
         assert len(stored) > 0
-        torch.testing.assert_close(logprobs_under(seen[k - 1][0], k), stored, atol=1e-4, rtol=1e-4)
-        assert (logprobs_under(seen[k][0], k) - stored).abs().max() > 1e-3
-    # the first two rollouts both come from the initial weights
-    torch.testing.assert_close(logprobs_under(seen[0][0], 0), seen[0][3][seen[0][4]], atol=1e-4, rtol=1e-4)
+        torch.testing.assert_close(logprobs_under(actor_weights[k][1], k), stored, atol=1e-4, rtol=1e-4)
+        if k:
+            assert (logprobs_under(seen[k][0], k) - stored).abs().max() > 1e-3
+            assert (logprobs_under(seen[k - 1][0], k) - stored).abs().max() > 1e-3
 
 
 def test_a_failing_collection_stops_training_with_its_error(tmp_path):

@@ -6,7 +6,10 @@ parameters after M more updates are bit-identical to an uninterrupted run (tests
 test_resume.py). The env's state is `VecEnv.get_state()` (sim/state.py: buffers, per-world
 generators, pending statistics); the spawner must draw its randomness only from the generator
 it is handed (DESIGN.md principle 7). Format 1 checkpoints (the env's attributes pickled as
-they were) still load.
+they were) still load. With `overlap_collection` a checkpoint also holds the actor's weights
+(`actor`) and whether a rollout was in flight (`pending_rollout`): then the collecting side's
+entries are those from before that rollout, which a resume collects again
+(tests/trainers/test_overlap.py).
 """
 
 from __future__ import annotations

@@ -113,12 +113,12 @@ class PPOConfig:
     (docs/training.md, "Speed")."""
 
     overlap_collection: bool = False
-    """Collect the next rollout in a second thread while the current one trains, so that the
-    simulator and the policy's inference run on one core while the update runs on another. The
-    next rollout is collected by the policy as it was before the running update (one update
-    behind the learner; PPO's ratio to the stored log-probabilities accounts for it). The
-    schedule is fixed, so a seed gives the same run every time; it is another run than with
-    false. Not under torchrun (the collector's collectives would race the update's)."""
+    """Collect the next rollout in a second thread during the current update's last epoch, so
+    that the simulator and the policy's inference run on one core while the update runs on
+    another. The next rollout is collected by the weights at the start of that epoch (one epoch
+    behind the next update's start; PPO's ratio to the stored log-probabilities accounts for
+    it). The schedule is fixed, so a seed gives the same run every time; it is another run than
+    with false. Not under torchrun (the collector's collectives would race the update's)."""
 
     deterministic: bool = False
     """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""

@@ -6,9 +6,12 @@ On a CPU the update runs on one core (small ops, one torch thread: docs/benchmar
 second core would otherwise stay idle. Both sides release the GIL in their heavy parts: the
 simulator steps `nogil`, and torch's ops drop it while they run.
 
-The schedule is fixed, whatever the threads' timing: rollout k+1 is collected by the policy's
-weights before update k (a copy, the *actor*), while update k trains on rollout k. So the data
-of an update is one update behind the learner, and a seed gives the same run every time.
+The schedule is fixed, whatever the threads' timing: when update k starts its last epoch, the
+policy's weights of that moment are copied into the *actor*, which collects rollout k+1 while
+the epoch runs (the collection, about a fifth of an update, fits in one epoch of three). So the
+data of an update comes from weights one epoch behind the update's start, and a seed gives the
+same run every time. Starting at the update's start instead (a whole update behind) hid the
+collection just as well but learnt less per step in the main job (docs/training.md, "Speed").
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ with requires_extra("torch"):
 
 def make_actor(model: nn.Module) -> nn.Module:
     """A copy of `model` that acts while `model` trains: no gradients, weights set with
-    `load_state_dict(model.state_dict())` before every update."""
+    `load_state_dict(model.state_dict())` when a collection starts."""
     actor = copy.deepcopy(model)
     for p in actor.parameters():
         p.requires_grad_(False)

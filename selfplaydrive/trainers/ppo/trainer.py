@@ -14,7 +14,7 @@ import os
 import time
 import warnings
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -169,7 +169,7 @@ class PPOTrainer:
         self.spare = RolloutStorage.allocate(*sizes) if self.overlap else None
         self._pending = False  # `storage` holds a collected rollout not trained on yet
         self._snapshot: dict[str, object] | None = None  # collector state before that rollout
-        self._actor_current = False  # the actor holds the weights of the update before
+        self._actor_current = False  # the actor holds the weights the pipeline collects with
         self._recollect = False  # resumed: the next collection repeats one counted and logged
         self.return_scaler = (
             ReturnScaler(self.num_slots, config.gamma, self.device) if config.norm_returns else None
@@ -331,8 +331,14 @@ class PPOTrainer:
         loss = pg - cfg.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
 
-    def update(self) -> dict[str, float]:
-        """PPO epochs over the stored rollout; returns mean losses and diagnostics."""
+    def update(self, hook: Callable[[], None] | None = None, hook_at: int = 0) -> dict[str, float]:
+        """PPO epochs over the stored rollout; returns mean losses and diagnostics.
+
+        Args:
+            hook: Called once, after `hook_at` optimizer steps (or at the end when the update
+                takes fewer): overlap_collection starts the next rollout's collection there.
+            hook_at: Optimizer steps before `hook`.
+        """
         cfg = self.config
         if cfg.anneal_lr:
             frac = 1.0 - self.update_idx / self.total_updates
@@ -340,6 +346,9 @@ class PPOTrainer:
         live = self._live_slots()
         sums: dict[str, float] = {}
         count = 0
+        if hook is not None and hook_at <= 0:
+            hook()
+            hook = None
         for _epoch in range(cfg.num_epochs):
             order = live[torch.randperm(len(live), generator=self.shuffle_gen).to(self.device)]
             for slots in torch.tensor_split(order, cfg.num_minibatches):
@@ -354,9 +363,14 @@ class PPOTrainer:
                 for k, v in info.items():
                     sums[k] = sums.get(k, 0.0) + float(v)
                 count += 1
+                if hook is not None and count == hook_at:
+                    hook()
+                    hook = None
             kl = all_reduce_mean(info["approx_kl"], self.dist)  # same decision on every rank
             if cfg.target_kl is not None and float(kl) > cfg.target_kl:
                 break
+        if hook is not None:
+            hook()
         out = {f"losses/{k}": v / max(count, 1) for k, v in sums.items()}
         out["losses/explained_variance"] = self._explained_variance()
         out["charts/learning_rate"] = self.optimizer.param_groups[0]["lr"]
@@ -430,34 +444,39 @@ class PPOTrainer:
     def _overlapped_update(self) -> tuple[dict[str, float], float]:
         """One update with `overlap_collection`; returns its metrics and the collection seconds.
 
-        Update k trains on rollout k while a second thread collects rollout k+1 with the
-        weights before update k (ppo/overlap.py). Between updates, also between `train()` calls,
-        the pipeline holds rollout k+1 (`_pending`); the run's last update collects nothing.
+        Update k trains on rollout k. When its last epoch starts, the actor takes the model's
+        weights of that moment and a second thread collects rollout k+1 with them while the
+        epoch runs (ppo/overlap.py). Between updates, also between `train()` calls, the
+        pipeline holds rollout k+1 (`_pending`); the run's last update collects nothing.
         Without a rollout in hand (the first update, a resume) the update collects its own
-        first, with the weights the pipeline would have used.
+        first, with the actor's weights.
         """
         t_collect = 0.0
         if not self._pending:
             start = time.perf_counter()
             if not self._actor_current:  # a fresh start (or init_from): the model's own weights
                 self.actor.load_state_dict(self.model.state_dict())
+                self._actor_current = True
             self._collect_first()
             t_collect = time.perf_counter() - start
-        self.actor.load_state_dict(self.model.state_dict())
-        self._actor_current = True
-        prefetch = None
-        if self.update_idx + 1 < self.total_updates:
+        prefetch: list[Prefetch] = []
+
+        def start_next() -> None:
+            self.actor.load_state_dict(self.model.state_dict())
             self._snapshot = self._collector_state()  # what a checkpoint after this update holds
-            prefetch = Prefetch(lambda: (self.collect(self.spare), self.compute_advantages(self.spare)))
+            prefetch.append(Prefetch(lambda: (self.collect(self.spare), self.compute_advantages(self.spare))))
+
+        last_epoch = self.config.num_minibatches * (self.config.num_epochs - 1)
+        hook = start_next if self.update_idx + 1 < self.total_updates else None
         try:
-            metrics = self.update()
+            metrics = self.update(hook, hook_at=last_epoch)
         except BaseException:
-            if prefetch is not None:
-                prefetch.wait()  # never leave the collector writing behind a raised exception
+            for p in prefetch:
+                p.wait()  # never leave the collector writing behind a raised exception
             raise
-        self._pending = prefetch is not None
-        if prefetch is not None:
-            t_collect += prefetch.result()
+        self._pending = bool(prefetch)
+        if prefetch:
+            t_collect += prefetch[0].result()
             self.storage, self.spare = self.spare, self.storage
         return metrics, t_collect
 
