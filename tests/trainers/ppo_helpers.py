@@ -221,3 +221,16 @@ def resume_trainer(run_dir, init_seed: int, **overrides) -> PPOTrainer:
     env = lane_env(num_worlds=3, seed=init_seed, episode_length=1.5)
     model = DeepSetsModel(env.layout, input_size=16, hidden_size=32, lstm_size=32)
     return PPOTrainer(env, model, PPOConfig(**dict(RESUME_CFG, **overrides)), run_dir)
+
+
+def assert_same_run(a: PPOTrainer, b: PPOTrainer) -> None:
+    """Two trainers are at the same point of the same run, bit for bit: weights, env buffers,
+    recurrent state, counters and the window of recent episodes."""
+    for (name, pa), pb in zip(a.model.state_dict().items(), b.model.state_dict().values(), strict=True):
+        assert torch.equal(pa, pb), name
+    for name, buf in a.env.buffers.items():
+        np.testing.assert_array_equal(buf, b.env.buffers[name], err_msg=name)
+    for sa, sb in zip(a.state, b.state, strict=True):
+        assert torch.equal(sa, sb)
+    assert (a.update_idx, a.global_step, a.agent_steps) == (b.update_idx, b.global_step, b.agent_steps)
+    assert list(a.recent) == list(b.recent) and list(a.recent_returns) == list(b.recent_returns)

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import copy
 
-import numpy as np
 import pytest
 import torch
+from ppo_helpers import assert_same_run
 from ppo_helpers import resume_trainer as make_trainer
 
 from selfplaydrive.errors import ConfigError
@@ -24,17 +24,6 @@ def overlapped(run_dir, init_seed=0, **overrides):
     # starts from the same weights as later ones
     torch.set_num_threads(1)
     return make_trainer(run_dir, init_seed, overlap_collection=True, keep_checkpoints=10, **overrides)
-
-
-def assert_same_run(a, b):
-    for (name, pa), pb in zip(a.model.state_dict().items(), b.model.state_dict().values(), strict=True):
-        assert torch.equal(pa, pb), name
-    for name, buf in a.env.buffers.items():
-        np.testing.assert_array_equal(buf, b.env.buffers[name], err_msg=name)
-    for sa, sb in zip(a.state, b.state, strict=True):
-        assert torch.equal(sa, sb)
-    assert (a.update_idx, a.global_step, a.agent_steps) == (b.update_idx, b.global_step, b.agent_steps)
-    assert list(a.recent) == list(b.recent) and list(a.recent_returns) == list(b.recent_returns)
 
 
 def test_overlapped_runs_repeat_and_split_calls_equal_one_call(tmp_path):

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import shutil
 
-import numpy as np
 import pytest
 import torch
 from ppo_helpers import RESUME_CFG as CFG
-from ppo_helpers import lane_env
+from ppo_helpers import assert_same_run, lane_env
 from ppo_helpers import resume_trainer as make_trainer
 
 from selfplaydrive.errors import CheckpointError, ConfigError
@@ -34,13 +33,7 @@ def test_resume_is_bit_identical(tmp_path, norm_returns):
         sa, sb = a.return_scaler, b.return_scaler
         assert (sa.count, sa.mean, sa.m2) == (sb.count, sb.mean, sb.m2)
         assert torch.equal(sa.running, sb.running)
-    for (name, pa), pb in zip(a.model.state_dict().items(), b.model.state_dict().values(), strict=True):
-        assert torch.equal(pa, pb), name
-    for name, buf in a.env.buffers.items():
-        np.testing.assert_array_equal(buf, b.env.buffers[name], err_msg=name)
-    for sa, sb in zip(a.state, b.state, strict=True):
-        assert torch.equal(sa, sb)
-    assert a.global_step == b.global_step and a.agent_steps == b.agent_steps
+    assert_same_run(a, b)
     # periodic checkpoints are pruned to keep_checkpoints
     assert [p.name for p in (tmp_path / "a" / "checkpoints").glob("ckpt_*.pt")] == [ckpt.checkpoint_name(4)]
 
