@@ -139,8 +139,8 @@ class PPOTrainer:
                 f"PPOConfig.overlap_collection = True under torchrun (world size {self.dist.world_size}): "
                 "expected false; the collector thread's collectives would race the update's"
             )
-        # the policy that collects: the model itself, or with overlap_collection its copy of one
-        # update ago (ppo/overlap.py)
+        # the policy that collects: the model itself, or with overlap_collection its copy, taken
+        # when an update's last epoch starts (ppo/overlap.py)
         self.actor = make_actor(self.model) if self.overlap else self.model
         self.evaluator = wrap(self.model, self.dist, self.device)
         self.compiled = config.compile and compile_model(self.model)
@@ -543,9 +543,9 @@ class PPOTrainer:
     def state_dict(self) -> dict[str, object]:
         """Everything `load_state_dict` needs to continue exactly (see checkpoint.py).
 
-        With a rollout in flight (overlap_collection, inside `train`), the collecting side's
-        state is the one saved before that rollout, and `pending_rollout` says so: a resume
-        collects it again with the saved actor weights.
+        With overlap_collection the pipeline holds the next rollout between updates: the
+        collecting side's state is then the one saved before that rollout, and
+        `pending_rollout` says so; a resume collects it again with the saved actor weights.
         """
         payload: dict[str, object] = {
             "config": self.config.to_dict(),
