@@ -109,7 +109,7 @@ def train_run(
     try:
         if checkpoint is not None:
             if hasattr(logger, "truncate"):  # what a stopped attempt logged after the checkpoint
-                logger.truncate(trainer.global_step * trainer.dist.world_size)
+                logger.truncate(trainer.trained_steps)
             logger.text(f"resuming from {checkpoint} at update {trainer.update_idx} in {run_dir}")
         trainer.train(logger=logger)
         trainer.save(run_dir / "checkpoints" / ckpt.final_name(trainer.dist.rank))

@@ -48,7 +48,8 @@ def test_a_checkpoint_between_calls_resumes_exactly(tmp_path):
     b.load(tmp_path / "between.pt")
     b.train(3)
     assert_same_run(a, b)
-    assert b.update_idx == b.total_updates and not b._pending  # the last update collects nothing
+    # the last update collects the next rollout too: a larger budget later continues exactly
+    assert b.update_idx == b.total_updates and b._pending
 
 
 def test_resume_from_a_checkpoint_written_with_a_rollout_in_flight(tmp_path):
@@ -130,3 +131,18 @@ def test_a_failing_collection_stops_training_with_its_error(tmp_path):
 def test_overlap_collection_must_be_a_bool():
     with pytest.raises(ConfigError, match=r"overlap_collection = 'yes': expected true or false"):
         PPOConfig(overlap_collection="yes")
+
+
+def test_evaluation_draws_as_if_the_rollout_in_hand_were_not_collected(tmp_path):
+    """The last update collects the next rollout too (so that an extended run continues
+    exactly); evaluations then sample from the generator as it was before that rollout, as a
+    trainer resumed from the checkpoint (which collects it again later) does."""
+    a = overlapped(tmp_path / "a", total_steps=3 * 3 * 4 * 12)
+    a.train()
+    assert a._pending
+    a.save(tmp_path / "final.pt")
+    b = overlapped(tmp_path / "b", init_seed=1, total_steps=3 * 3 * 4 * 12)
+    b.load(tmp_path / "final.pt")
+    assert not b._pending
+    for seed in (5, 6):  # the second evaluation continues the first one's draws
+        assert a.evaluate(4, 200, False, seed) == b.evaluate(4, 200, False, seed)

@@ -118,7 +118,8 @@ class PPOConfig:
     another. The next rollout is collected by the weights at the start of that epoch (one epoch
     behind the next update's start; PPO's ratio to the stored log-probabilities accounts for
     it). The schedule is fixed, so a seed gives the same run every time; it is another run than
-    with false. Not under torchrun (the collector's collectives would race the update's)."""
+    with false. Switched off, with a warning, under torchrun (the collector's collectives
+    would race the update's)."""
 
     deterministic: bool = False
     """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from selfplaydrive._optional import requires_extra
-from selfplaydrive.errors import CheckpointError, ConfigError
+from selfplaydrive.errors import CheckpointError
 from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
@@ -133,11 +133,14 @@ class PPOTrainer:
         if config.deterministic:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
-        self.overlap = config.overlap_collection
-        if self.overlap and self.dist.enabled:
-            raise ConfigError(
-                f"PPOConfig.overlap_collection = True under torchrun (world size {self.dist.world_size}): "
-                "expected false; the collector thread's collectives would race the update's"
+        self.overlap = config.overlap_collection and not self.dist.enabled
+        if config.overlap_collection and self.dist.enabled:
+            # the main job sets it: under torchrun it is switched off rather than refused
+            warnings.warn(
+                f"trainer.overlap_collection is off under torchrun (world size {self.dist.world_size}): "
+                "the collector thread's collectives would race the update's",
+                RuntimeWarning,
+                stacklevel=2,
             )
         # the policy that collects: the model itself, or with overlap_collection its copy, taken
         # when an update's last epoch starts (ppo/overlap.py)
@@ -171,6 +174,7 @@ class PPOTrainer:
         self._snapshot: dict[str, object] | None = None  # collector state before that rollout
         self._actor_current = False  # the actor holds the weights the pipeline collects with
         self._recollect = False  # resumed: the next collection repeats one counted and logged
+        self._eval_gen: torch.Generator | None = None  # evaluate()'s while a rollout is in hand
         self.return_scaler = (
             ReturnScaler(self.num_slots, config.gamma, self.device) if config.norm_returns else None
         )
@@ -212,10 +216,13 @@ class PPOTrainer:
     # ROLLOUT: act in every slot of every world, straight from the env's buffers
     @torch.inference_mode()
     def act(
-        self, deterministic: bool = False, net: nn.Module | None = None
+        self,
+        deterministic: bool = False,
+        net: nn.Module | None = None,
+        generator: torch.Generator | None = None,
     ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        """Policy step of `net` (default: the actor) on the current observations; advances the
-        recurrent state.
+        """Policy step of `net` (default: the actor) on the current observations, sampling from
+        `generator` (default: `sample_gen`); advances the recurrent state.
 
         Only the slots that act (`env.masks`) are evaluated: with a third of the slots acting
         (experiment=laptop) the others would cost two thirds of the inference for outputs that
@@ -238,7 +245,7 @@ class PPOTrainer:
             with self.autocast():
                 logits, value, state = (net or self.actor)(obs[rows], state, self.next_start[rows])
             logits = logits.float()
-            sampled = sample_actions(logits, self.nvec, deterministic, generator=self.sample_gen)
+            sampled = sample_actions(logits, self.nvec, deterministic, generator=generator or self.sample_gen)
             actions[rows] = sampled
             logprobs[rows] = log_prob(logits, sampled, self.nvec)
             values[rows] = value.float()
@@ -433,7 +440,7 @@ class PPOTrainer:
                     metrics.update(extra)
             if logger is not None:
                 if self.update_idx % cfg.log_interval == 0:
-                    logger.scalars(metrics, self.global_step * self.dist.world_size)
+                    logger.scalars(metrics, self.trained_steps)
                 logger.progress(1, metrics)
             if cfg.checkpoint_interval and self.update_idx % cfg.checkpoint_interval == 0:
                 self.save_periodic()
@@ -441,15 +448,24 @@ class PPOTrainer:
             self._call("on_end", metrics)
         return metrics
 
+    @property
+    def trained_steps(self) -> int:
+        """Slot-steps of all ranks that the updates so far trained on: the x axis of the logs.
+        With overlap_collection `global_step` also counts the rollout in hand (or, after a
+        resume, the one about to be collected again), which no update has trained on yet."""
+        ahead = self.slots_per_update if self._pending or self._recollect else 0
+        return (self.global_step - ahead) * self.dist.world_size
+
     def _overlapped_update(self) -> tuple[dict[str, float], float]:
         """One update with `overlap_collection`; returns its metrics and the collection seconds.
 
         Update k trains on rollout k. When its last epoch starts, the actor takes the model's
         weights of that moment and a second thread collects rollout k+1 with them while the
         epoch runs (ppo/overlap.py). Between updates, also between `train()` calls, the
-        pipeline holds rollout k+1 (`_pending`); the run's last update collects nothing.
-        Without a rollout in hand (the first update, a resume) the update collects its own
-        first, with the actor's weights.
+        pipeline holds rollout k+1 (`_pending`). The run's last update collects one too, so
+        that a run extended later (a resume with a larger `total_steps`) continues as one that
+        never stopped. Without a rollout in hand (the first update, a resume) the update
+        collects its own first, with the actor's weights.
         """
         t_collect = 0.0
         if not self._pending:
@@ -462,22 +478,21 @@ class PPOTrainer:
         prefetch: list[Prefetch] = []
 
         def start_next() -> None:
+            self._eval_gen = None
             self.actor.load_state_dict(self.model.state_dict())
             self._snapshot = self._collector_state()  # what a checkpoint after this update holds
             prefetch.append(Prefetch(lambda: (self.collect(self.spare), self.compute_advantages(self.spare))))
 
         last_epoch = self.config.num_minibatches * (self.config.num_epochs - 1)
-        hook = start_next if self.update_idx + 1 < self.total_updates else None
         try:
-            metrics = self.update(hook, hook_at=last_epoch)
+            metrics = self.update(start_next, hook_at=last_epoch)
         except BaseException:
             for p in prefetch:
                 p.wait()  # never leave the collector writing behind a raised exception
             raise
-        self._pending = bool(prefetch)
-        if prefetch:
-            t_collect += prefetch[0].result()
-            self.storage, self.spare = self.spare, self.storage
+        t_collect += prefetch[0].result()
+        self.storage, self.spare = self.spare, self.storage
+        self._pending = True
         return metrics, t_collect
 
     def _collect_first(self) -> None:
@@ -510,8 +525,6 @@ class PPOTrainer:
         return {f"recent/{k}": window[k] for k in RECENT_KEYS if k in window}
 
     def _rates(self, agent_steps: int, t_collect: float, t_total: float) -> dict[str, float]:
-        if t_collect <= 0.0:  # overlap_collection: the run's last update collects nothing
-            return {}
         return {
             "sps": agent_steps * self.dist.world_size / t_total,
             "collect_sps": agent_steps / t_collect,
@@ -525,12 +538,17 @@ class PPOTrainer:
     def evaluate(self, episodes: int, max_steps: int, deterministic: bool, seed: int) -> dict[str, float]:
         """Run the policy on fresh episodes (env reset with `seed`) until `episodes` world
         episodes ended or `max_steps` env steps; returns `episodes.summarize` of them. Training
-        afterwards starts from a fresh reset."""
+        afterwards starts from a fresh reset.
+
+        Sampled actions come from `sample_gen`; with a rollout in hand (overlap_collection),
+        from a copy of its state before that rollout, which later evaluations continue: an
+        evaluation then draws what it would have drawn had the rollout not been collected yet."""
         self.reset_env(seed)
+        generator = self._evaluation_generator()
         records: list[dict[str, object]] = []
         returns: list[float] = []
         for _ in range(max_steps):
-            _, actions, _, _, acted = self.act(deterministic, net=self.model)
+            _, actions, _, _, acted = self.act(deterministic, net=self.model, generator=generator)
             self.env_step(actions, acted, net=self.model)
             r, g = self.tracker.pop()
             records += r
@@ -539,6 +557,14 @@ class PPOTrainer:
                 break
         self.needs_reset = True
         return summarize(records, returns)
+
+    def _evaluation_generator(self) -> torch.Generator:
+        if not self._pending:
+            return self.sample_gen
+        if self._eval_gen is None:
+            self._eval_gen = torch.Generator(device=self.device)
+            self._eval_gen.set_state(self._snapshot["sample_gen"])
+        return self._eval_gen
 
     def state_dict(self) -> dict[str, object]:
         """Everything `load_state_dict` needs to continue exactly (see checkpoint.py).
