@@ -172,7 +172,6 @@ class PPOTrainer:
         self.spare = RolloutStorage.allocate(*sizes) if self.overlap else None
         self._pending = False  # `storage` holds a collected rollout not trained on yet
         self._snapshot: dict[str, object] | None = None  # collector state before that rollout
-        self._actor_current = False  # the actor holds the weights the pipeline collects with
         self._recollect = False  # resumed: the next collection repeats one counted and logged
         self._eval_gen: torch.Generator | None = None  # evaluate()'s while a rollout is in hand
         self.return_scaler = (
@@ -470,9 +469,8 @@ class PPOTrainer:
         t_collect = 0.0
         if not self._pending:
             start = time.perf_counter()
-            if not self._actor_current:  # a fresh start (or init_from): the model's own weights
+            if not self._recollect:  # a fresh start (or init_from): the model's own weights
                 self.actor.load_state_dict(self.model.state_dict())
-                self._actor_current = True
             self._collect_first()
             t_collect = time.perf_counter() - start
         prefetch: list[Prefetch] = []
@@ -585,7 +583,7 @@ class PPOTrainer:
             "shuffle_gen": self.shuffle_gen.get_state(),
             "recent": (list(self.recent), list(self.recent_returns)),
         }
-        payload.update(self._snapshot if self._pending and self._snapshot else self._collector_state())
+        payload.update(self._snapshot if self._pending else self._collector_state())
         if self.overlap:
             payload["actor"] = copy.deepcopy(self.actor.state_dict())
             payload["pending_rollout"] = self._pending
@@ -634,8 +632,7 @@ class PPOTrainer:
         self._load_callbacks(payload.get("callbacks", []))
         if self.overlap:
             self._pending = False
-            self._actor_current = "actor" in payload
-            if self._actor_current:
+            if "actor" in payload:
                 self.actor.load_state_dict(payload["actor"])
             self._recollect = bool(payload.get("pending_rollout", False))
 
