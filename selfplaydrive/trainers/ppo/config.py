@@ -76,7 +76,12 @@ class PPOConfig:
     reward weights. Logged returns and evaluations keep the env's own rewards."""
 
     ent_coef: float = 0.005
-    """Weight of the entropy bonus (subtracted from the loss)."""
+    """Weight of the entropy bonus (subtracted from the loss) at the first update."""
+
+    ent_coef_final: float | None = None
+    """Anneal the entropy bonus linearly from `ent_coef` towards this weight, on the learning
+    rate's schedule: update u of U uses `ent_coef_final + (ent_coef - ent_coef_final) * (1 - u / U)`
+    (logged as `charts/ent_coef`). None keeps `ent_coef` throughout."""
 
     vf_coef: float = 0.5
     """Weight of the value loss."""
@@ -176,6 +181,9 @@ class PPOConfig:
         for name in ("ent_coef", "vf_coef"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 _bad(name, getattr(self, name), "a finite number >= 0")
+        final = self.ent_coef_final
+        if final is not None and not (_is_number(final) and math.isfinite(final) and final >= 0):
+            _bad("ent_coef_final", final, "None or a finite number >= 0")
         if self.target_kl is not None and not self.target_kl > 0:
             _bad("target_kl", self.target_kl, "None or a number > 0")
         if not isinstance(self.host_register, bool):
@@ -192,6 +200,13 @@ class PPOConfig:
             _bad("callbacks", self.callbacks, "a list of callback objects or _target_ mappings")
         if not (self.device == "auto" or self.device == "cpu" or self.device.startswith("cuda")):
             _bad("device", self.device, "'auto', 'cpu', 'cuda' or 'cuda:N'")
+
+    def entropy_weight(self, remaining: float) -> float:
+        """Entropy-bonus weight when a share `remaining` of the updates is left (1 at the
+        first update, 1/U at the last, the learning rate's factor under `anneal_lr`)."""
+        if self.ent_coef_final is None:
+            return self.ent_coef
+        return self.ent_coef_final + (self.ent_coef - self.ent_coef_final) * remaining
 
     def to_dict(self) -> dict[str, object]:
         """Plain dict of every field (for the run folder and checkpoints); callbacks appear as
@@ -212,6 +227,10 @@ class PPOConfig:
 
 def _bad(name: str, value: object, expected: str) -> None:
     raise ConfigError(f"PPOConfig.{name} = {value!r}: expected {expected}")
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
 
 
 def _positive_ints(cfg: PPOConfig, *names: str) -> None:

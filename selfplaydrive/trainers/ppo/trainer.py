@@ -181,6 +181,7 @@ class PPOTrainer:
         self.recent: deque[dict[str, object]] = deque(maxlen=RECENT_WORLD_EPISODES)
         self.recent_returns: deque[float] = deque(maxlen=RECENT_WORLD_EPISODES * env.agents_per_world)
         self.update_idx = 0
+        self.ent_coef = config.ent_coef  # this update's entropy weight (`update` sets it)
         self.global_step = 0  # slot-steps collected by this rank
         self.agent_steps = 0  # active agent-steps collected by this rank
         self.needs_reset = True
@@ -334,7 +335,7 @@ class PPOTrainer:
         pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef)
         vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef)
         ent = masked_mean(entropies, mask)
-        loss = pg - cfg.ent_coef * ent + cfg.vf_coef * vl
+        loss = pg - self.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
 
     def update(self, hook: Callable[[], None] | None = None, hook_at: int = 0) -> dict[str, float]:
@@ -346,9 +347,10 @@ class PPOTrainer:
             hook_at: Optimizer steps before `hook`.
         """
         cfg = self.config
+        frac = 1.0 - self.update_idx / self.total_updates
         if cfg.anneal_lr:
-            frac = 1.0 - self.update_idx / self.total_updates
             self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
+        self.ent_coef = cfg.entropy_weight(frac)
         live = self._live_slots()
         sums: dict[str, float] = {}
         count = 0
@@ -380,6 +382,7 @@ class PPOTrainer:
         out = {f"losses/{k}": v / max(count, 1) for k, v in sums.items()}
         out["losses/explained_variance"] = self._explained_variance()
         out["charts/learning_rate"] = self.optimizer.param_groups[0]["lr"]
+        out["charts/ent_coef"] = self.ent_coef
         if self.return_scaler is not None:
             out["charts/return_scale"] = self.return_scaler.std
         return out
