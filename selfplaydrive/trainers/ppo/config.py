@@ -126,6 +126,14 @@ class PPOConfig:
     with false. Switched off, with a warning, under torchrun (the collector's collectives
     would race the update's)."""
 
+    update_threads: int = 1
+    """Threads that compute each minibatch's gradient, each on a part of its agent slots (a
+    replica of the model per extra thread; `ppo/parallel.py`). The parts' losses are scaled so
+    that their gradients add up to the minibatch's: the same update up to float rounding, and
+    the same run for a seed at any thread timing. With `overlap_collection` the minibatches
+    after the collection starts run on one thread (the collector has the other core). 1 under
+    torchrun, with a warning."""
+
     deterministic: bool = False
     """Ask torch for deterministic kernels (`torch.use_deterministic_algorithms`)."""
 
@@ -167,6 +175,7 @@ class PPOConfig:
     def validate(self) -> None:
         """Raise ConfigError naming the key, the value and the expected range."""
         _positive_ints(self, "total_steps", "rollout_length", "num_epochs", "num_minibatches", "log_interval")
+        _positive_ints(self, "update_threads")
         _non_negative_ints(self, "checkpoint_interval", "eval_episodes", "eval_max_steps", "torch_threads")
         if self.keep_checkpoints < 1:
             _bad("keep_checkpoints", self.keep_checkpoints, "an int >= 1")

@@ -30,8 +30,15 @@ from selfplaydrive.trainers.ppo.config import PPOConfig
 from selfplaydrive.trainers.ppo.dist import DistInfo, all_reduce_mean, init_distributed, wrap
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 from selfplaydrive.trainers.ppo.logging import RunLogger
-from selfplaydrive.trainers.ppo.losses import masked_mean, normalize_advantages, policy_loss, value_loss
+from selfplaydrive.trainers.ppo.losses import (
+    advantage_stats,
+    masked_mean,
+    normalize_advantages,
+    policy_loss,
+    value_loss,
+)
 from selfplaydrive.trainers.ppo.overlap import Prefetch, make_actor
+from selfplaydrive.trainers.ppo.parallel import PartWorkers
 from selfplaydrive.trainers.ppo.returns import ReturnScaler
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
 from selfplaydrive.trainers.ppo.uploads import Uploader
@@ -93,6 +100,8 @@ def warn_spinning_threads(device: torch.device) -> None:
 # world-episodes: with a laptop's handful of worlds, one update often ends none or one episode,
 # and the per-update numbers alone are too noisy to see learning in.
 RECENT_WORLD_EPISODES = 32
+# a minibatch's count of active entries and advantage (mean, std + eps), for its parts
+MinibatchStats = tuple["Tensor", tuple["Tensor", "Tensor"]]
 RECENT_KEYS = ("waypoint_completion", "return_mean", "collision_rate", "offroad_rate", "km")
 
 
@@ -145,6 +154,14 @@ class PPOTrainer:
         # the policy that collects: the model itself, or with overlap_collection its copy, taken
         # when an update's last epoch starts (ppo/overlap.py)
         self.actor = make_actor(self.model) if self.overlap else self.model
+        self.update_threads = 1 if self.dist.enabled else config.update_threads
+        if config.update_threads > 1 and self.dist.enabled:
+            warnings.warn(
+                f"trainer.update_threads is 1 under torchrun (world size {self.dist.world_size}): "
+                "the ranks already split the batch",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         self.evaluator = wrap(self.model, self.dist, self.device)
         self.compiled = config.compile and compile_model(self.model)
         # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
@@ -189,6 +206,9 @@ class PPOTrainer:
         self.next_start = torch.ones(self.num_slots, dtype=torch.bool, device=self.device)
         self._to_device = Uploader(self.device, config.host_register)  # (array, key) -> Tensor
         self.callbacks = build_callbacks(config.callbacks)
+        # update_threads: replicas that compute the other parts of each minibatch (ppo/parallel.py)
+        extra = self.update_threads - 1
+        self._parallel = PartWorkers(self.model, extra, self.minibatch_loss) if extra else None
 
     # ---------------------------------------------------------------------------------------
     # setup helpers
@@ -323,20 +343,62 @@ class PPOTrainer:
 
     # ---------------------------------------------------------------------------------------
     # UPDATE: epochs x minibatches of whole slot sequences (BPTT), clipped PPO losses
-    def minibatch_loss(self, slots: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
-        """Total loss of the agent slots `slots` and its parts."""
+    def minibatch_loss(
+        self, slots: Tensor, net: nn.Module | None = None, whole: MinibatchStats | None = None
+    ) -> tuple[Tensor, dict[str, Tensor]]:
+        """Total loss of the agent slots `slots` and its parts.
+
+        Args:
+            slots: (K,) agent slots, whole (T,) sequences each.
+            net: The sequence evaluator that computes it (default: the model's, DDP-wrapped
+                under torchrun); `update_threads` hands the other parts to replicas.
+            whole: `minibatch_stats` of the minibatch that `slots` is a part of: the means are
+                then divided by its count of active entries and advantages normalised by its
+                statistics, so that the parts' losses add up to the minibatch's.
+        """
         cfg, mb = self.config, self.storage.minibatch(slots)
         with self.autocast():
             active = mb["active"] if self.skip_inactive else None
-            logits, values, _ = self.evaluator(mb["obs"], mb["initial_state"], mb["episode_start"], active)
+            evaluator = net or self.evaluator
+            logits, values, _ = evaluator(mb["obs"], mb["initial_state"], mb["episode_start"], active)
         logits, values, mask = logits.float(), values.float(), mb["active"]
+        count, stats = (None, None) if whole is None else whole
         new_logprob, entropies = log_prob_and_entropy(logits, mb["actions"], self.nvec)
-        adv = normalize_advantages(mb["advantages"], mask) if cfg.norm_adv else mb["advantages"]
-        pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef)
-        vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef)
-        ent = masked_mean(entropies, mask)
+        adv = normalize_advantages(mb["advantages"], mask, stats=stats) if cfg.norm_adv else mb["advantages"]
+        pg, info = policy_loss(new_logprob, mb["logprobs"], adv, mask, cfg.clip_coef, count)
+        vl = value_loss(values, mb["values"], mb["returns"], mask, cfg.clip_value, cfg.value_clip_coef, count)
+        ent = masked_mean(entropies, mask, count)
         loss = pg - self.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
+
+    def minibatch_stats(self, slots: Tensor) -> MinibatchStats:
+        """Count of active entries and advantage statistics of the minibatch `slots`."""
+        s = self.storage
+        mask = s.active.index_select(1, slots)
+        return mask.sum().float(), advantage_stats(s.advantages.index_select(1, slots), mask)
+
+    def minibatch_step(self, slots: Tensor, threads: int) -> dict[str, Tensor]:
+        """Gradient of the minibatch `slots` into the model's `.grad` (set, not accumulated);
+        returns the loss parts. With `threads` > 1 the slots are cut into that many parts, and
+        part k > 0 runs forward and backward on replica k in a pool thread while this thread
+        runs part 0; the replicas' gradients are then added in order (the same sum up to float
+        rounding, and the same bits on every run)."""
+        self.optimizer.zero_grad(set_to_none=True)
+        if threads <= 1 or len(slots) < threads:
+            loss, info = self.minibatch_loss(slots)
+            loss.backward()
+            return info
+        parts = torch.tensor_split(slots, threads)
+        whole = self.minibatch_stats(slots)
+        self._parallel.sync(self.model)
+        jobs = [self._parallel.submit(k, part, whole) for k, part in enumerate(parts[1:])]
+        loss, info = self.minibatch_loss(parts[0], whole=whole)
+        loss.backward()
+        for job in jobs:
+            for k, v in job.result().items():  # re-raises a part's exception here
+                info[k] = info[k] + v
+        self._parallel.add_gradients(self.model)
+        return info
 
     def update(self, hook: Callable[[], None] | None = None, hook_at: int = 0) -> dict[str, float]:
         """PPO epochs over the stored rollout; returns mean losses and diagnostics.
@@ -354,17 +416,18 @@ class PPOTrainer:
         live = self._live_slots()
         sums: dict[str, float] = {}
         count = 0
+        # once the hook has started the next rollout's collection, the collector has a core:
+        # the minibatches that follow run on one thread
+        threads = self.update_threads
         if hook is not None and hook_at <= 0:
             hook()
-            hook = None
+            hook, threads = None, 1
         for _epoch in range(cfg.num_epochs):
             order = live[torch.randperm(len(live), generator=self.shuffle_gen).to(self.device)]
             for slots in torch.tensor_split(order, cfg.num_minibatches):
                 if not len(slots):  # more minibatches than agent slots
                     continue
-                loss, info = self.minibatch_loss(slots)
-                self.optimizer.zero_grad(set_to_none=True)
-                loss.backward()
+                info = self.minibatch_step(slots, threads)
                 if cfg.max_grad_norm > 0:
                     info["grad_norm"] = nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
@@ -373,7 +436,7 @@ class PPOTrainer:
                 count += 1
                 if hook is not None and count == hook_at:
                     hook()
-                    hook = None
+                    hook, threads = None, 1
             kl = all_reduce_mean(info["approx_kl"], self.dist)  # same decision on every rank
             if cfg.target_kl is not None and float(kl) > cfg.target_kl:
                 break
