@@ -379,7 +379,7 @@ class PPOTrainer:
 
     def minibatch_step(self, slots: Tensor, threads: int) -> dict[str, Tensor]:
         """Gradient of the minibatch `slots` into the model's `.grad` (set, not accumulated);
-        returns the loss parts. With `threads` > 1 the slots are cut into that many parts, and
+        returns the loss parts. With `threads` > 1 the slots are dealt into that many parts, and
         part k > 0 runs forward and backward on replica k in a pool thread while this thread
         runs part 0; the replicas' gradients are then added in order (the same sum up to float
         rounding, and the same bits on every run)."""
@@ -388,7 +388,7 @@ class PPOTrainer:
             loss, info = self.minibatch_loss(slots)
             loss.backward()
             return info
-        parts = torch.tensor_split(slots, threads)
+        parts = self._balanced_parts(slots, threads)
         whole = self.minibatch_stats(slots)
         self._parallel.sync(self.model)
         jobs = [self._parallel.submit(k, part, whole) for k, part in enumerate(parts[1:])]
@@ -399,6 +399,14 @@ class PPOTrainer:
                 info[k] = info[k] + v
         self._parallel.add_gradients(self.model)
         return info
+
+    def _balanced_parts(self, slots: Tensor, parts: int) -> list[Tensor]:
+        """`slots` dealt into `parts` parts of (nearly) equal size and equal active entries:
+        sorted by their active entries (stable), then dealt round-robin. The encoders' work
+        follows the active entries, the LSTM's the slots; the slowest part sets the pace."""
+        counts = self.storage.active.index_select(1, slots).sum(dim=0)
+        order = slots[torch.sort(counts, descending=True, stable=True).indices]
+        return [order[k::parts] for k in range(parts)]
 
     def update(self, hook: Callable[[], None] | None = None, hook_at: int = 0) -> dict[str, float]:
         """PPO epochs over the stored rollout; returns mean losses and diagnostics.
