@@ -146,3 +146,23 @@ def test_evaluation_draws_as_if_the_rollout_in_hand_were_not_collected(tmp_path)
     assert not b._pending
     for seed in (5, 6):  # the second evaluation continues the first one's draws
         assert a.evaluate(4, 200, False, seed) == b.evaluate(4, 200, False, seed)
+
+
+def test_a_checkpoint_with_a_rollout_in_flight_resumes_without_overlap_counting_it_once(tmp_path):
+    """Resumed with overlap_collection off, the rollout in flight is collected again by the
+    model and counted once: slot-steps stay one rollout per update, also through a checkpoint
+    written right after the load, before that rollout was collected again."""
+    a = overlapped(tmp_path / "a")
+    a.train(2)
+    path = tmp_path / "a" / "checkpoints" / ckpt.checkpoint_name(2)
+    b = make_trainer(tmp_path / "b", 1, overlap_collection=False)
+    b.load(path)
+    per_update = b.slots_per_update
+    assert (b.update_idx, b.global_step, b.trained_steps) == (2, 3 * per_update, 2 * per_update)
+    b.save(tmp_path / "reloaded.pt")  # the rollout is still to be collected again
+    c = make_trainer(tmp_path / "c", 2, overlap_collection=False)
+    c.load(tmp_path / "reloaded.pt")
+    for t in (b, c):
+        t.train(2)
+        assert (t.update_idx, t.global_step, t.trained_steps) == (4, 4 * per_update, 4 * per_update)
+    assert_same_run(b, c)

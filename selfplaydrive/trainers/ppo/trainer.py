@@ -498,8 +498,7 @@ class PPOTrainer:
             if self.overlap:
                 metrics, t_collect = self._overlapped_update()
             else:
-                self.collect()
-                self.compute_advantages()
+                self._collect_first()
                 t_collect = time.perf_counter() - t0
                 metrics = self.update()
             self.update_idx += 1
@@ -568,10 +567,11 @@ class PPOTrainer:
         return metrics, t_collect
 
     def _collect_first(self) -> None:
-        """Collect the rollout of the coming update before it (overlap_collection). After a
-        resume from a checkpoint written with a rollout in flight, that rollout is collected
-        again from the state saved before it: its steps were counted and its episodes logged
-        before the checkpoint, so they are not counted or logged twice."""
+        """Collect the rollout of the coming update before it. After a resume from a
+        checkpoint written with a rollout in flight (overlap_collection, resumed with or
+        without it), that rollout is collected again from the state saved before it: its
+        steps were counted and its episodes logged before the checkpoint, so they are not
+        counted or logged twice."""
         counters = (self.global_step, self.agent_steps)
         self.collect()
         self.compute_advantages()
@@ -643,7 +643,8 @@ class PPOTrainer:
 
         With overlap_collection the pipeline holds the next rollout between updates: the
         collecting side's state is then the one saved before that rollout, and
-        `pending_rollout` says so; a resume collects it again with the saved actor weights.
+        `pending_rollout` says so; a resume collects it again (with the saved actor weights
+        under overlap_collection, with the model's without it) and does not count it twice.
         """
         payload: dict[str, object] = {
             "config": self.config.to_dict(),
@@ -658,9 +659,11 @@ class PPOTrainer:
             "recent": (list(self.recent), list(self.recent_returns)),
         }
         payload.update(self._snapshot if self._pending else self._collector_state())
+        # the counters include a rollout that the saved state has not collected yet: one in
+        # hand, or one a resume has yet to collect again
+        payload["pending_rollout"] = self._pending or self._recollect
         if self.overlap:
             payload["actor"] = copy.deepcopy(self.actor.state_dict())
-            payload["pending_rollout"] = self._pending
         return payload
 
     def _collector_state(self) -> dict[str, object]:
@@ -704,11 +707,10 @@ class PPOTrainer:
         if "rng" in payload:
             ckpt.set_rng_state(payload["rng"])
         self._load_callbacks(payload.get("callbacks", []))
-        if self.overlap:
-            self._pending = False
-            if "actor" in payload:
-                self.actor.load_state_dict(payload["actor"])
-            self._recollect = bool(payload.get("pending_rollout", False))
+        self._pending = False
+        if self.overlap and "actor" in payload:
+            self.actor.load_state_dict(payload["actor"])
+        self._recollect = bool(payload.get("pending_rollout", False))
 
     def _load_callbacks(self, saved: list[dict[str, object]]) -> None:
         """Restore the callbacks' states by position where the saved name matches (a callback
