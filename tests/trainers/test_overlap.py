@@ -166,3 +166,13 @@ def test_a_checkpoint_with_a_rollout_in_flight_resumes_without_overlap_counting_
         t.train(2)
         assert (t.update_idx, t.global_step, t.trained_steps) == (4, 4 * per_update, 4 * per_update)
     assert_same_run(b, c)
+
+
+def test_a_checkpoint_without_an_actor_gives_the_actor_the_models_weights(tmp_path):
+    a = make_trainer(tmp_path / "a", 0, overlap_collection=False)
+    a.train(2)
+    a.save(tmp_path / "plain.pt")
+    b = overlapped(tmp_path / "b", init_seed=1)
+    b.load(tmp_path / "plain.pt")
+    for (name, p), q in zip(b.model.state_dict().items(), b.actor.state_dict().values(), strict=True):
+        assert torch.equal(p, q), name

@@ -6,10 +6,10 @@ parameters after M more updates are bit-identical to an uninterrupted run (tests
 test_resume.py). The env's state is `VecEnv.get_state()` (sim/state.py: buffers, per-world
 generators, pending statistics); the spawner must draw its randomness only from the generator
 it is handed (DESIGN.md principle 7). Format 1 checkpoints (the env's attributes pickled as
-they were) still load. With `overlap_collection` a checkpoint also holds the actor's weights
-(`actor`) and whether a rollout was in flight (`pending_rollout`): then the collecting side's
-entries are those from before that rollout, which a resume collects again
-(tests/trainers/test_overlap.py).
+they were) still load. `pending_rollout` says whether the counters include a rollout that the
+saved state has not collected yet (one in flight under `overlap_collection`, whose actor
+weights are saved as `actor`): the collecting side's entries are those from before it, and a
+resume collects it again without counting it twice (tests/trainers/test_overlap.py).
 """
 
 from __future__ import annotations

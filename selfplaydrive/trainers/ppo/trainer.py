@@ -708,8 +708,8 @@ class PPOTrainer:
             ckpt.set_rng_state(payload["rng"])
         self._load_callbacks(payload.get("callbacks", []))
         self._pending = False
-        if self.overlap and "actor" in payload:
-            self.actor.load_state_dict(payload["actor"])
+        if self.overlap:  # a checkpoint of a run without overlap has no actor: the model's weights
+            self.actor.load_state_dict(payload.get("actor", payload["model"]))
         self._recollect = bool(payload.get("pending_rollout", False))
 
     def _load_callbacks(self, saved: list[dict[str, object]]) -> None:
