@@ -7,7 +7,7 @@ are cut into parts; part 0 runs forward and backward on the model in the calling
 part k > 0 runs on replica k in a pool thread (torch's ops release the GIL, and each thread runs
 its ops itself with one intra-op thread). Each part's loss is divided by the whole minibatch's
 count of active entries and normalises advantages by the whole minibatch's statistics
-(`PPOTrainer.minibatch_stats`), so the parts' gradients add up to the minibatch's gradient:
+(`PPOTrainer.minibatch_step`), so the parts' gradients add up to the minibatch's gradient:
 the same update up to float rounding. The replicas take the model's weights before every
 minibatch and their gradients are added in a fixed order, so a seed gives the same run at any
 timing of the threads.
@@ -78,6 +78,10 @@ class PartWorkers:
                         p.grad.add_(q.grad)
                     q.grad = None
 
-    def close(self) -> None:
-        """Stop the pool threads (idle ones exit; a running part finishes first)."""
-        self._pool.shutdown(wait=True)
+
+def balanced_parts(slots: Tensor, active: Tensor, parts: int) -> list[Tensor]:
+    """`slots` dealt into `parts` parts of (nearly) equal size and equal active entries
+    (`active`: each slot's count): sorted by it (stable), then dealt round-robin. The encoders'
+    work follows the active entries, the LSTM's the slots; the slowest part sets the pace."""
+    order = slots[torch.sort(active, descending=True, stable=True).indices]
+    return [order[k::parts] for k in range(parts)]

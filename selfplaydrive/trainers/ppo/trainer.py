@@ -38,7 +38,7 @@ from selfplaydrive.trainers.ppo.losses import (
     value_loss,
 )
 from selfplaydrive.trainers.ppo.overlap import Prefetch, make_actor
-from selfplaydrive.trainers.ppo.parallel import PartWorkers
+from selfplaydrive.trainers.ppo.parallel import PartWorkers, balanced_parts
 from selfplaydrive.trainers.ppo.returns import ReturnScaler
 from selfplaydrive.trainers.ppo.storage import RolloutStorage, State
 from selfplaydrive.trainers.ppo.uploads import Uploader
@@ -142,26 +142,19 @@ class PPOTrainer:
         if config.deterministic:
             torch.use_deterministic_algorithms(True)
         self.model = model.to(self.device)
-        self.overlap = config.overlap_collection and not self.dist.enabled
-        if config.overlap_collection and self.dist.enabled:
-            # the main job sets it: under torchrun it is switched off rather than refused
-            warnings.warn(
-                f"trainer.overlap_collection is off under torchrun (world size {self.dist.world_size}): "
-                "the collector thread's collectives would race the update's",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        # the main job sets overlap_collection: under torchrun it is switched off, not refused
+        self.overlap = self._single_process_only(
+            "overlap_collection",
+            config.overlap_collection,
+            False,
+            "the collector's collectives would race the update's",
+        )
         # the policy that collects: the model itself, or with overlap_collection its copy, taken
         # when an update's last epoch starts (ppo/overlap.py)
         self.actor = make_actor(self.model) if self.overlap else self.model
-        self.update_threads = 1 if self.dist.enabled else config.update_threads
-        if config.update_threads > 1 and self.dist.enabled:
-            warnings.warn(
-                f"trainer.update_threads is 1 under torchrun (world size {self.dist.world_size}): "
-                "the ranks already split the batch",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        self.update_threads = self._single_process_only(
+            "update_threads", config.update_threads, 1, "the ranks already split the batch"
+        )
         self.evaluator = wrap(self.model, self.dist, self.device)
         self.compiled = config.compile and compile_model(self.model)
         # Models whose forward_sequence takes `active` skip the entries that carry no loss. Not
@@ -212,6 +205,17 @@ class PPOTrainer:
 
     # ---------------------------------------------------------------------------------------
     # setup helpers
+    def _single_process_only(self, key: str, value: object, off: object, why: str) -> object:
+        """`value`, or `off` with a RuntimeWarning under torchrun (an option for one process)."""
+        if value == off or not self.dist.enabled:
+            return value
+        warnings.warn(
+            f"trainer.{key} = {value!r} is {off!r} under torchrun (world size {self.dist.world_size}): {why}",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return off
+
     def _amp_dtype(self) -> torch.dtype | None:
         p = self.config.precision
         if p == "bf16" or (p == "auto" and self.device.type == "cuda"):
@@ -352,9 +356,10 @@ class PPOTrainer:
             slots: (K,) agent slots, whole (T,) sequences each.
             net: The sequence evaluator that computes it (default: the model's, DDP-wrapped
                 under torchrun); `update_threads` hands the other parts to replicas.
-            whole: `minibatch_stats` of the minibatch that `slots` is a part of: the means are
-                then divided by its count of active entries and advantages normalised by its
-                statistics, so that the parts' losses add up to the minibatch's.
+            whole: (count of active entries, advantage statistics) of the minibatch that `slots`
+                is a part of (`minibatch_step`): the means are then divided by that count and
+                advantages normalised by those statistics, so that the parts' losses add up to
+                the minibatch's.
         """
         cfg, mb = self.config, self.storage.minibatch(slots)
         with self.autocast():
@@ -371,12 +376,6 @@ class PPOTrainer:
         loss = pg - self.ent_coef * ent + cfg.vf_coef * vl
         return loss, dict(info, policy=pg.detach(), value=vl.detach(), entropy=ent.detach())
 
-    def minibatch_stats(self, slots: Tensor) -> MinibatchStats:
-        """Count of active entries and advantage statistics of the minibatch `slots`."""
-        s = self.storage
-        mask = s.active.index_select(1, slots)
-        return mask.sum().float(), advantage_stats(s.advantages.index_select(1, slots), mask)
-
     def minibatch_step(self, slots: Tensor, threads: int) -> dict[str, Tensor]:
         """Gradient of the minibatch `slots` into the model's `.grad` (set, not accumulated);
         returns the loss parts. With `threads` > 1 the slots are dealt into that many parts, and
@@ -388,8 +387,10 @@ class PPOTrainer:
             loss, info = self.minibatch_loss(slots)
             loss.backward()
             return info
-        parts = self._balanced_parts(slots, threads)
-        whole = self.minibatch_stats(slots)
+        mask = self.storage.active.index_select(1, slots)
+        parts = balanced_parts(slots, mask.sum(dim=0), threads)
+        # the whole minibatch's count of active entries and advantage statistics
+        whole = mask.sum().float(), advantage_stats(self.storage.advantages.index_select(1, slots), mask)
         self._parallel.sync(self.model)
         jobs = [self._parallel.submit(k, part, whole) for k, part in enumerate(parts[1:])]
         loss, info = self.minibatch_loss(parts[0], whole=whole)
@@ -399,14 +400,6 @@ class PPOTrainer:
                 info[k] = info[k] + v
         self._parallel.add_gradients(self.model)
         return info
-
-    def _balanced_parts(self, slots: Tensor, parts: int) -> list[Tensor]:
-        """`slots` dealt into `parts` parts of (nearly) equal size and equal active entries:
-        sorted by their active entries (stable), then dealt round-robin. The encoders' work
-        follows the active entries, the LSTM's the slots; the slowest part sets the pace."""
-        counts = self.storage.active.index_select(1, slots).sum(dim=0)
-        order = slots[torch.sort(counts, descending=True, stable=True).indices]
-        return [order[k::parts] for k in range(parts)]
 
     def update(self, hook: Callable[[], None] | None = None, hook_at: int = 0) -> dict[str, float]:
         """PPO epochs over the stored rollout; returns mean losses and diagnostics.
