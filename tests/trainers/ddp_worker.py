@@ -11,8 +11,10 @@ and both resume: each saves the error it got to `<out>/error.rank<r>.txt`.
 (importable with this folder on PYTHONPATH).
 """
 
+import dataclasses
 import os
 import sys
+import warnings
 from pathlib import Path
 
 import torch
@@ -69,9 +71,12 @@ def main(out: Path) -> None:
     torch.manual_seed(1000 + int(os.environ["RANK"]))  # ranks start different
     env = lane_env(num_worlds=2, seed=0)
     model = DeepSetsModel(env.layout, input_size=8, hidden_size=16, lstm_size=16)
-    cfg = tiny_config(2, 0, env.num_agents)
+    # update_threads is an option for one process: under torchrun the trainer turns it off, warns
+    cfg = dataclasses.replace(tiny_config(2, 0, env.num_agents), update_threads=2)
     start = {k: v.clone() for k, v in model.state_dict().items()}  # before DDP's broadcast
-    trainer = PPOTrainer(env, model, cfg)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        trainer = PPOTrainer(env, model, cfg)
     trainer.train()
     torch.save(
         {
@@ -80,6 +85,8 @@ def main(out: Path) -> None:
             "start": start,
             "end": model.state_dict(),
             "first_obs": trainer.storage.obs[0].clone(),
+            "update_threads": trainer.update_threads,
+            "warnings": [str(w.message) for w in caught],
         },
         out / f"rank{trainer.dist.rank}.pt",
     )

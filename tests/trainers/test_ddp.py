@@ -28,6 +28,11 @@ def test_two_ranks_keep_identical_parameters_on_different_data(tmp_path):
     for k in r0["end"]:
         assert torch.equal(r0["end"][k], r1["end"][k]), k
     assert any(not torch.equal(r0["start"][k], r0["end"][k]) for k in r0["end"])
+    # asked for update_threads=2, each rank trained on one thread and said why
+    for r in (r0, r1):
+        assert r["update_threads"] == 1
+        said = "trainer.update_threads = 2 is 1 under torchrun"
+        assert any(said in w for w in r["warnings"]), r["warnings"]
 
 
 def test_a_resume_whose_ranks_find_different_updates_fails_on_every_rank(tmp_path):
