@@ -7,6 +7,7 @@ take. docs/training.md "The pretrained policy" records the result for the shippe
     python benchmarks/turn_lane_probe.py                                  # the pretrained policy
     python benchmarks/turn_lane_probe.py --policy rule_based --count 32
     python benchmarks/turn_lane_probe.py --policy runs/x/checkpoints/final.pt --map tartu
+    python benchmarks/turn_lane_probe.py --policy runs/x/checkpoints/ckpt_0000400.pt --paper-only --seed 2
 """
 
 from __future__ import annotations
@@ -17,8 +18,11 @@ import sys
 import time
 
 
-def probe(policy: str, map_name: str, count: int, entry: float, seed: int) -> dict[str, object]:
-    """Outcome counts of both variants (scenarios generated from the same seed)."""
+def probe(
+    policy: str, map_name: str, count: int, entry: float, seed: int, paper_only: bool = False
+) -> dict[str, object]:
+    """Outcome counts of both variants (scenarios generated from the same seed), or of the
+    paper's variant only."""
     from selfplaydrive.builder import build_maps, compose
     from selfplaydrive.eval.app import EvalEnvFactory, resolve_target
     from selfplaydrive.eval.suites.report import run_all_suites
@@ -29,7 +33,8 @@ def probe(policy: str, map_name: str, count: int, entry: float, seed: int) -> di
     maps = build_maps(cfg.map)
     factory = EvalEnvFactory(maps, target)
     out: dict[str, object] = {"policy": policy, "map": map_name, "seed": seed, "entry_waypoint_m": entry}
-    for label, suite in (("paper", TurnLaneSuite()), ("entry_waypoint", TurnLaneSuite(entry_waypoint=entry))):
+    variants = [("paper", TurnLaneSuite()), ("entry_waypoint", TurnLaneSuite(entry_waypoint=entry))]
+    for label, suite in variants[: 1 if paper_only else 2]:
         start = time.perf_counter()
         res = run_all_suites(
             maps, target.policy.factory, {"turn_lanes": count}, seed, 64, factory, {"turn_lanes": suite}
@@ -53,8 +58,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--count", type=int, default=128)
     parser.add_argument("--entry", type=float, default=15.0, help="[m] before the junction")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--paper-only", action="store_true", help="skip the variant that names the lane")
     args = parser.parse_args(argv)
-    print(json.dumps(probe(args.policy, args.map, args.count, args.entry, args.seed), indent=2))
+    out = probe(args.policy, args.map, args.count, args.entry, args.seed, args.paper_only)
+    print(json.dumps(out, indent=2))
     return 0
 
 
