@@ -388,9 +388,10 @@ class PPOTrainer:
             loss.backward()
             return info
         mask = self.storage.active.index_select(1, slots)
-        parts = balanced_parts(slots, mask.sum(dim=0), threads)
+        per_slot = mask.sum(dim=0)
+        parts = balanced_parts(slots, per_slot, threads)
         # the whole minibatch's count of active entries and advantage statistics
-        whole = mask.sum().float(), advantage_stats(self.storage.advantages.index_select(1, slots), mask)
+        whole = per_slot.sum().float(), advantage_stats(self.storage.advantages.index_select(1, slots), mask)
         self._parallel.sync(self.model)
         jobs = [self._parallel.submit(k, part, whole) for k, part in enumerate(parts[1:])]
         loss, info = self.minibatch_loss(parts[0], whole=whole)
