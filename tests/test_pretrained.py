@@ -159,6 +159,9 @@ def test_evaluations_switch_the_training_curricula_off():
 
     run_cfg = load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG)
     run_cfg.spawner.turn_lane_worlds, run_cfg.spawner.turn_lane_starts = 0.5, 3
+    # as if trained at the fixed values (reward=eval, the main job's default): the diversity run
+    # still draws the coefficients per agent from the run's ranges
+    run_cfg.reward.mode = "eval"
     before = OmegaConf.to_container(run_cfg)
     for eval_coefficients in (False, True):
         spawner = _training_spawner(SimpleNamespace(run_config=run_cfg), eval_coefficients)

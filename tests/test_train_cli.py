@@ -62,21 +62,28 @@ def test_same_seed_same_run_and_another_seed_differs(tmp_path):
     assert_same_params(params(a), params(b))
     # the initial weights follow the seed too: another seed gives other parameters
     assert any(not torch.equal(p, params(c)[k]) for k, p in params(a).items())
+    # the main job trains under the fixed evaluation coefficients (reward=eval): one evaluation,
+    # which names that protocol
     summary = json.loads((a / "eval.json").read_text())
+    assert summary["protocol"] == "fixed_eval_coefficients" and summary["actions"] == "sampled"
+    assert "fixed_eval_coefficients" not in summary and "agent_episodes" in summary
+
+
+def test_a_conditioned_run_is_evaluated_under_both_protocols_unless_asked_not_to(tmp_path):
+    # reward=paper draws the coefficients per agent (section 2.3): evaluated under that
+    # distribution, then from the same seed under the paper's protocol
+    summary = json.loads((train(tmp_path / "paper", 1, "reward=paper") / "eval.json").read_text())
     assert summary["protocol"] == "training_distribution" and summary["actions"] == "sampled"
-    # the same seed again under the paper's evaluation protocol (trainer.eval_fixed_coefficients)
     fixed = summary["fixed_eval_coefficients"]
     assert fixed["protocol"] == "fixed_eval_coefficients" and fixed["actions"] == "sampled"
     assert "agent_episodes" in fixed
-
-
-def test_the_paper_protocol_evaluation_is_optional_and_not_repeated(tmp_path):
-    off = train(tmp_path / "off", 1, "trainer.eval_fixed_coefficients=false")
+    off = train(tmp_path / "off", 1, "reward=paper", "trainer.eval_fixed_coefficients=false")
     assert "fixed_eval_coefficients" not in json.loads((off / "eval.json").read_text())
-    # trained under the fixed coefficients already: one evaluation, which names that protocol
-    fixed = json.loads((train(tmp_path / "fixed", 1, "reward=eval") / "eval.json").read_text())
-    assert fixed["protocol"] == "fixed_eval_coefficients"
-    assert "fixed_eval_coefficients" not in fixed
+    # fixed coefficients with a curriculum on: the training worlds are not the protocol's either
+    curriculum = train(tmp_path / "curriculum", 1, "spawner.turn_lane_worlds=0.5")
+    summary = json.loads((curriculum / "eval.json").read_text())
+    assert summary["protocol"] == "training_distribution"
+    assert summary["fixed_eval_coefficients"]["protocol"] == "fixed_eval_coefficients"
 
 
 def test_resume_from_folder_and_checkpoint_matches_an_uninterrupted_run(tmp_path):

@@ -340,9 +340,11 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
 
 
 def _training_spawner(target: EvalTarget, eval_coefficients: bool = False) -> Any:
-    """The spawner of the policy's training run, else the paper's; its coefficients drawn from
-    the run's training distribution, or (`eval_coefficients`) the paper's fixed evaluation values.
-    The run's training curricula (turn-lane starts and worlds, `CURRICULUM_OPTIONS`) are off."""
+    """The spawner of the policy's training run, else the paper's; its coefficients drawn per agent
+    from the run's reward ranges (section 2.3, also for a run trained at the fixed values with
+    `reward=eval`, the main job's default), or (`eval_coefficients`) the paper's fixed evaluation
+    values. The run's training curricula (turn-lane starts and worlds, `CURRICULUM_OPTIONS`) are
+    off."""
     from selfplaydrive.scenario.conditioning import ConditioningSampler
     from selfplaydrive.scenario.spawner import PaperSpawner, without_curricula
 
@@ -354,8 +356,7 @@ def _training_spawner(target: EvalTarget, eval_coefficients: bool = False) -> An
 
     run_cfg = OmegaConf.create(OmegaConf.to_container(target.run_config, resolve=False))
     without_curricula(run_cfg.spawner)  # turn-lane starts and worlds train; they are not the world
-    if eval_coefficients:
-        run_cfg.reward.mode = "eval"
+    run_cfg.reward.mode = "eval" if eval_coefficients else "train"
     return build_spawner(run_cfg)  # with the run's reward group's sampler
 
 

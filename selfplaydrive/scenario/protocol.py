@@ -54,6 +54,13 @@ def uses_paper_coefficients(spawner: object) -> bool:
     return getattr(getattr(spawner, "conditioning", None), "mode", None) == "eval"
 
 
+def follows_protocol(spawner: object) -> bool:
+    """Whether `spawner` already draws the paper's evaluation worlds: the fixed evaluation
+    coefficients (`reward=eval`, the main job's default) and every training curriculum off."""
+    curricula_off = all(getattr(spawner, key, off) == off for key, off in CURRICULUM_OPTIONS.items())
+    return uses_paper_coefficients(spawner) and curricula_off
+
+
 def has_protocol(spawner: object) -> bool:
     """Whether `paper_protocol` can switch `spawner` (it has a conditioning sampler with a mode)."""
     return hasattr(getattr(spawner, "conditioning", None), "mode")

@@ -24,7 +24,7 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
-from selfplaydrive.scenario.protocol import has_protocol, paper_protocol, uses_paper_coefficients
+from selfplaydrive.scenario.protocol import follows_protocol, has_protocol, paper_protocol
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
 from selfplaydrive.trainers.ppo.config import PPOConfig
 from selfplaydrive.trainers.ppo.dist import check_resume_agrees
@@ -229,14 +229,15 @@ def final_evaluation(trainer: PPOTrainer, env, cfg: PPOConfig) -> dict[str, obje
     """The end-of-training evaluation: `cfg.eval_episodes` world episodes under the env's own
     coefficient draws and, with `cfg.eval_fixed_coefficients`, again from the same seed under the
     paper's evaluation protocol (`scenario.protocol.paper_protocol`), nested under the key
-    "fixed_eval_coefficients" (skipped for a spawner without a conditioning sampler). Each
-    summary records its protocol (`eval_protocol`)."""
+    "fixed_eval_coefficients" (skipped for a spawner without a conditioning sampler, and for one
+    that already follows that protocol: `reward=eval` without curricula). Each summary records
+    its protocol (`eval_protocol`)."""
     seed = cfg.seed + EVAL_SEED_OFFSET + trainer.dist.rank
     args = (cfg.eval_episodes, cfg.eval_max_steps, cfg.eval_deterministic, seed)
     summary: dict[str, object] = trainer.evaluate(*args)
     summary.update(eval_protocol(env, cfg.eval_deterministic))
     spawner = getattr(env, "spawner", None)
-    if cfg.eval_fixed_coefficients and has_protocol(spawner) and not uses_paper_coefficients(spawner):
+    if cfg.eval_fixed_coefficients and has_protocol(spawner) and not follows_protocol(spawner):
         with paper_protocol(spawner):  # evaluate() resets every world inside the block
             fixed = trainer.evaluate(*args)
             fixed.update(eval_protocol(env, cfg.eval_deterministic))
@@ -248,12 +249,12 @@ def eval_protocol(env, deterministic: bool) -> dict[str, str]:
     """How the final evaluation chose its reward coefficients and actions (recorded in eval.json).
 
     `PPOTrainer.evaluate` runs on the training env, so the coefficients are those of the env's
-    spawner: "fixed_eval_coefficients" when its conditioning sampler is in eval mode (paper
-    section 5: every penalty at its maximum, B = 0, D = 3 m; `reward=eval`), otherwise
-    "training_distribution" (random draws per agent, as in training). Not the protocol of
-    `selfplaydrive eval`, which builds its own scenarios.
+    spawner: "fixed_eval_coefficients" when it follows the paper's protocol (section 5: every
+    penalty at its maximum, B = 0, D = 3 m, training curricula off; `reward=eval`), otherwise
+    "training_distribution" (the worlds drawn as in training: coefficients per agent, or
+    curricula on). Not the protocol of `selfplaydrive eval`, which builds its own scenarios.
     """
-    fixed = uses_paper_coefficients(getattr(env, "spawner", None))
+    fixed = follows_protocol(getattr(env, "spawner", None))
     return {
         "protocol": "fixed_eval_coefficients" if fixed else "training_distribution",
         "actions": "greedy" if deterministic else "sampled",

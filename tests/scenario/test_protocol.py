@@ -9,7 +9,12 @@ import pytest
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.loader import load_map
 from selfplaydrive.scenario.conditioning import ConditioningSampler
-from selfplaydrive.scenario.protocol import has_protocol, paper_protocol, uses_paper_coefficients
+from selfplaydrive.scenario.protocol import (
+    follows_protocol,
+    has_protocol,
+    paper_protocol,
+    uses_paper_coefficients,
+)
 from selfplaydrive.scenario.spawner import PaperSpawner
 
 FIELDS = ("agent_xy", "agent_speed", "waypoints", "num_waypoints", "coeffs", "static_xy", "ped_path")
@@ -34,8 +39,9 @@ def _same(a, b) -> None:
 def test_inside_the_block_the_worlds_are_the_papers_evaluation_worlds(town):
     spawner = _curriculum_spawner()
     paper = PaperSpawner(num_agents=16, lane_change_prob=0.5, conditioning=ConditioningSampler(mode="eval"))
+    assert not follows_protocol(spawner)
     with paper_protocol(spawner):
-        assert uses_paper_coefficients(spawner)
+        assert uses_paper_coefficients(spawner) and follows_protocol(spawner)
         inside = spawner.sample(town, np.random.default_rng(4))
     _same(inside, paper.sample(town, np.random.default_rng(4)))
     n = int(inside.agent_valid.sum())
@@ -49,7 +55,7 @@ def test_the_spawner_is_restored_after_the_block_and_after_an_error(town):
     with pytest.raises(RuntimeError, match="boom"):
         with paper_protocol(spawner):
             raise RuntimeError("boom")
-    assert not uses_paper_coefficients(spawner)
+    assert not uses_paper_coefficients(spawner) and not follows_protocol(spawner)
     settings = (spawner.conditioning.mode, spawner.turn_lane_starts, spawner.turn_lane_worlds)
     assert settings == ("train", 4, 0.5)
     _same(spawner.sample(town, np.random.default_rng(8)), before)
@@ -72,3 +78,12 @@ def test_a_spawner_without_conditioning_is_named():
     with pytest.raises(ConfigError, match="Bare has no conditioning sampler"):
         with paper_protocol(Bare()):
             pass
+
+
+def test_fixed_coefficients_with_a_curriculum_on_are_not_the_protocol():
+    """`reward=eval` fixes the coefficients; a turn-lane curriculum beside it still trains on worlds
+    the protocol has not (the trainer then evaluates a second time, inside `paper_protocol`)."""
+    fixed = ConditioningSampler(mode="eval")
+    assert follows_protocol(PaperSpawner(num_agents=16, conditioning=fixed))
+    curriculum = PaperSpawner(num_agents=16, turn_lane_worlds=0.25, conditioning=fixed)
+    assert uses_paper_coefficients(curriculum) and not follows_protocol(curriculum)
