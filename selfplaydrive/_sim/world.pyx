@@ -244,6 +244,15 @@ cdef class World:
         self.prm.collision_speed_gain = p["collision_speed_gain"]; self.prm.center_bonus = p["center_bonus"]
         self.prm.center_bonus_offset = p["center_bonus_offset"]; self.prm.align_bonus = p["align_bonus"]
 
+    def set_term_weight(self, int k, double weight):
+        """Set the weight of column k of the reward from the next step on (a schedule of term
+        weights between rollouts, `VecEnv.set_term_weight`); never during a step."""
+        if not 0 <= k < self.sim.num_terms:
+            raise IndexError(f"set_term_weight: column {k} is outside 0..{self.sim.num_terms - 1}")
+        if not np.isfinite(weight):
+            raise ValueError(f"set_term_weight: column {k}: expected a finite weight, got {weight!r}")
+        self.slots[k].weight = <float>weight
+
     def step(self, int num_threads=1, bint profile=False, int chunk=0):
         """Advance every world one step; with `profile`, stage by stage with timings. `chunk`:
         worlds handed to a thread at a time (0: 2 when there are at least 4 per thread, else 1;

@@ -511,6 +511,32 @@ class VecEnv:
     def stage_names(self) -> tuple[str, ...]:
         return (*STAGES, "reset")
 
+    def set_term_weight(self, name: str, weight: float) -> None:
+        """Set the weight of reward column `name` from the next step on, e.g. a schedule of a
+        term's weight over training (`trainers.callbacks.TermWeightSchedule`). Call it between
+        steps, never while another thread steps this env.
+
+        Raises:
+            ConfigError: An unknown column name (the message lists the env's) or a weight that
+                is not a finite number.
+        """
+        if name not in self.term_names:
+            names = ", ".join(self.term_names)
+            raise ConfigError(f"set_term_weight: no reward column {name!r}; columns: {names}")
+        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
+            raise ConfigError(f"set_term_weight: {name}: expected a finite number, got {weight!r}")
+        if not np.isfinite(weight):
+            raise ConfigError(f"set_term_weight: {name}: expected a finite number, got {weight!r}")
+        k = self.term_names.index(name)
+        self._world.set_term_weight(k, float(weight))
+        columns = list(self.reward.columns)  # Python columns are weighted after the step from here
+        columns[k] = dataclasses.replace(columns[k], weight=float(weight))
+        self.reward.columns = tuple(columns)
+
+    def term_weight(self, name: str) -> float:
+        """The current weight of reward column `name` (see `set_term_weight`)."""
+        return float(self.reward.columns[self.term_names.index(name)].weight)
+
     # editing a running rollout (sim/edit.py): evaluations that move agents or give new routes --
     def reset_worlds(
         self, worlds: Sequence[int] | np.ndarray, scenarios: Sequence[Scenario] | None = None

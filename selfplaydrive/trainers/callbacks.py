@@ -5,6 +5,10 @@ these methods only where the object defines it, in the order the callbacks are l
 
 - `on_start(trainer)`: at the start of every `train()` call (also after a resume), before
   the first update of that call.
+- `on_rollout(trainer)`: before the first env step of every training rollout (in the collector
+  thread with `overlap_collection`); `trainer.global_step // trainer.slots_per_update` is the
+  rollout's index, the same in every run of a seed, so what it sets follows the rollout, not
+  the timing of threads. The env is not being stepped while it runs.
 - `on_step(trainer)`: after every env step of a training rollout (not of the evaluation);
   `trainer.env` holds the step's results. Keep it cheap: it runs rollout_length times per
   update.
@@ -32,7 +36,7 @@ import numpy as np
 
 from selfplaydrive.errors import ConfigError
 
-HOOKS = ("on_start", "on_step", "on_update", "on_end", "state_dict", "load_state_dict")
+HOOKS = ("on_start", "on_rollout", "on_step", "on_update", "on_end", "state_dict", "load_state_dict")
 
 
 def build_callbacks(specs: Sequence[Any]) -> list[Any]:
@@ -200,3 +204,44 @@ def _restore_recorder(recorder: Any, state: Mapping[str, Any]) -> None:
     recorder._pair_exp = np.array(state["pair_exposure"], dtype=np.float64)
     recorder._prev = np.array(state["prev_events"], dtype=np.uint8)
     recorder._steps = int(state["steps"])
+
+
+class TermWeightSchedule:
+    """A reward term's weight moved linearly over training, e.g. a collision penalty that grows
+    once the policy drives (docs/training.md "Callbacks"): the weight of rollout i is
+    ``start + (end - start) * min(1, i / (fraction * total_updates))``, set on the env before
+    the rollout's first step (`VecEnv.set_term_weight`). It depends only on the rollout's
+    index, so a resumed run continues the schedule exactly; the final evaluation runs at the
+    last weight. Logged as ``schedule/<term>_weight``.
+
+    Args:
+        term: A reward column of the env (`env.term_names`), e.g. "collision".
+        start: Weight of the first rollout.
+        end: Weight from `fraction` of the updates on.
+        fraction: Share of the updates over which the weight moves, in (0, 1].
+
+    Raises:
+        ConfigError: A weight that is not a finite number or a fraction outside (0, 1].
+    """
+
+    def __init__(self, term: str, start: float, end: float, fraction: float = 1.0) -> None:
+        for key, value in (("start", start), ("end", end)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"TermWeightSchedule {key}: expected a finite number, got {value!r}")
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction <= 1:
+            raise ConfigError(f"TermWeightSchedule fraction: expected a number in (0, 1], got {fraction!r}")
+        self.term, self.start, self.end, self.fraction = str(term), float(start), float(end), float(fraction)
+
+    def weight(self, rollout: int, total_updates: int) -> float:
+        """The weight of rollout `rollout` (0-based) of a run of `total_updates` updates."""
+        progress = min(1.0, rollout / max(1e-9, self.fraction * total_updates))
+        return self.start + (self.end - self.start) * progress
+
+    def on_rollout(self, trainer: Any) -> None:
+        rollout = trainer.global_step // trainer.slots_per_update
+        trainer.env.set_term_weight(self.term, self.weight(rollout, trainer.total_updates))
+
+    def on_update(self, trainer: Any, metrics: Mapping[str, float]) -> dict[str, float]:
+        # the weight of the rollout this update trained on (with overlap_collection the env
+        # already holds the next one's)
+        return {f"schedule/{self.term}_weight": self.weight(trainer.update_idx - 1, trainer.total_updates)}

@@ -14,7 +14,7 @@ from ppo_helpers import TinyPolicy, lane_env
 from selfplaydrive.builder import compose, instantiate
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
-from selfplaydrive.trainers.callbacks import DiversityCallback, build_callbacks
+from selfplaydrive.trainers.callbacks import DiversityCallback, TermWeightSchedule, build_callbacks
 
 T = 6  # rollout_length
 CFG = dict(
@@ -35,6 +35,9 @@ class Recorder:
 
     def on_start(self, trainer) -> None:
         self.calls.append(("start", trainer.update_idx))
+
+    def on_rollout(self, trainer) -> None:
+        self.calls.append(("rollout", trainer.update_idx))
 
     def on_step(self, trainer) -> None:
         self.calls.append(("step", trainer.update_idx))
@@ -73,6 +76,8 @@ def test_hooks_run_in_order_and_returned_scalars_are_logged():
     kinds = [k for k, _ in cb.calls]
     assert kinds.count("start") == 2 and kinds.count("end") == 1 and kinds[-1] == "end"
     assert kinds.count("step") == 5 * T and kinds.count("update") == 5
+    assert [u for k, u in cb.calls if k == "rollout"] == [0, 1, 2, 3, 4]  # before each rollout
+    assert kinds[kinds.index("rollout") + 1] == "step"
     assert [u for k, u in cb.calls if k == "update"] == [1, 2, 3, 4, 5]
     assert [row["custom/update"] for row in logger.rows] == [1.0, 2.0, 3.0, 4.0, 5.0]
     trainer.evaluate(1, 20, False, seed=9)  # the evaluation's steps are not training steps
@@ -126,3 +131,42 @@ def test_diversity_state_survives_a_resume_exactly(tmp_path):
         np.testing.assert_array_equal(getattr(la, name), getattr(lb, name), err_msg=name)
     assert b_cb.recorder._steps == a_cb.recorder._steps == 3 * T
     assert len(la.lat_bias) > 0
+
+
+class WeightSpy:
+    """Records the env's collision weight at every training step."""
+
+    def __init__(self) -> None:
+        self.weights: list[float] = []
+
+    def on_step(self, trainer) -> None:
+        self.weights.append(trainer.env.term_weight("collision"))
+
+
+def test_term_weight_schedule_values_by_hand():
+    schedule = TermWeightSchedule("collision", start=1.0, end=3.0, fraction=0.5)
+    # 10 updates: the weight moves over the first 5 rollouts, 0.4 per rollout, then stays
+    got = [schedule.weight(i, 10) for i in range(10)]
+    assert got == pytest.approx([1.0, 1.4, 1.8, 2.2, 2.6, 3.0, 3.0, 3.0, 3.0, 3.0])
+    for bad in ({"fraction": 0}, {"fraction": 1.5}, {"start": float("nan")}, {"end": "3"}):
+        with pytest.raises(ConfigError, match="TermWeightSchedule"):
+            TermWeightSchedule(**{"term": "collision", "start": 1.0, "end": 3.0, **bad})
+
+
+@pytest.mark.parametrize("overlap", [False, True])
+def test_term_weight_schedule_sets_each_rollout_and_runs_repeat_exactly(overlap):
+    runs = []
+    for _ in range(2):
+        spy, logger = WeightSpy(), ListLogger()
+        schedule = TermWeightSchedule("collision", start=1.0, end=2.0)
+        trainer = make_trainer([schedule, spy], overlap_collection=overlap)
+        trainer.train(logger=logger)
+        runs.append((spy.weights, [row["schedule/collision_weight"] for row in logger.rows], trainer))
+    (weights, logged, a), (weights_b, logged_b, b) = runs
+    per_rollout = [1.0, 1.2, 1.4, 1.6, 1.8]  # 5 updates, the weight moving over all of them
+    assert logged == pytest.approx(per_rollout) and logged_b == logged
+    # every step of rollout i ran at rollout i's weight (with overlap, one more rollout is in hand)
+    assert weights[: 5 * T] == pytest.approx([w for w in per_rollout for _ in range(T)])
+    assert weights_b == weights
+    for name, p in a.model.state_dict().items():
+        assert torch.equal(p, b.model.state_dict()[name]), name

@@ -119,7 +119,7 @@ class PPOTrainer:
         run_dir: Folder for TensorBoard files and checkpoints (None: neither is written).
 
     Callbacks (`config.callbacks`, contract in `selfplaydrive.trainers.callbacks`) are built
-    once here and called from `collect` (`on_step`) and `train` (`on_start`, `on_update`,
+    once here and called from `collect` (`on_rollout`, `on_step`) and `train` (`on_start`, `on_update`,
     `on_end`); their `state_dict` travels in the checkpoints.
 
     Raises:
@@ -311,6 +311,9 @@ class PPOTrainer:
         if self.needs_reset:
             self.reset_env(cfg.seed + self.dist.rank)
         s.initial_state = tuple(x.clone() for x in self.state)
+        # before the rollout's first step, at the same point of every run (also in the collector
+        # thread of overlap_collection): what a callback sets here follows the rollout's index
+        self._call("on_rollout")
         for t in range(cfg.rollout_length):
             s.episode_start[t] = self.next_start
             s.obs[t], s.actions[t], s.logprobs[t], s.values[t], s.active[t] = self.act()
