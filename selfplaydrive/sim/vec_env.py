@@ -523,9 +523,8 @@ class VecEnv:
         if name not in self.term_names:
             names = ", ".join(self.term_names)
             raise ConfigError(f"set_term_weight: no reward column {name!r}; columns: {names}")
-        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating, np.integer)):
-            raise ConfigError(f"set_term_weight: {name}: expected a finite number, got {weight!r}")
-        if not np.isfinite(weight):
+        number = isinstance(weight, (int, float, np.floating, np.integer)) and not isinstance(weight, bool)
+        if not (number and np.isfinite(weight)):
             raise ConfigError(f"set_term_weight: {name}: expected a finite number, got {weight!r}")
         k = self.term_names.index(name)
         self._world.set_term_weight(k, float(weight))
