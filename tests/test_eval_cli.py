@@ -99,6 +99,10 @@ def test_eval_rule_based_writes_reports(tmp_path, capsys):
     missed = sum(o["missed_share"] for o in outcomes)
     assert missed == pytest.approx(1.0 - done["waypoint_completion"])
     assert "| vehicle_collision |" in (out / "completion.md").read_text()
+    # the same rollout's vehicle collisions by kind (eval.collisions)
+    kinds = done["collision_kinds"]
+    assert sum(kinds[k]["count"] for k in ("static", "rear_end", "crossing", "head_on")) == kinds["collisions"]
+    assert "| head_on |" in (out / "completion.md").read_text()
     meta = json.loads((out / "run_meta.json").read_text())
     assert meta["seed"] == 0
     assert len(meta["git_commit"]) == 40 or meta["git_commit"] == "unknown"

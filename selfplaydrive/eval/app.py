@@ -315,6 +315,7 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
     """Waypoint completion under the paper's fixed evaluation coefficients, in the policy's
     training spawner (its agents per world, routes and episode lengths), with every missed
     waypoint charged to how its agent ended (`eval.misses`)."""
+    from selfplaydrive.eval.collisions import CollisionRecorder
     from selfplaydrive.eval.misses import completion_breakdown
     from selfplaydrive.eval.report import write_report
 
@@ -324,7 +325,11 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
     source = "the training run's spawner" if own else "the paper's spawner"
     env = make_env(spawner, int(c.num_worlds), seed=int(cfg.seed))
     _say(f"completion: {int(c.world_episodes)} world-episodes in {int(c.num_worlds)} worlds ({source}) ...")
-    table = completion_breakdown(env, target.policy, int(c.world_episodes), seed=int(cfg.seed))
+    collisions = CollisionRecorder(env)
+    table = completion_breakdown(
+        env, target.policy, int(c.world_episodes), seed=int(cfg.seed), recorders=[collisions]
+    )
+    kinds = collisions.breakdown()
     protocol = {
         "coefficients": "the paper's fixed evaluation values (conf/reward/eval.yaml)",
         "spawner": source,
@@ -332,10 +337,13 @@ def _run_completion(cfg: Any, target: EvalTarget, make_env: EvalEnvFactory, run_
         "seed": int(cfg.seed),
         "actions": "sampled",
     }
-    paths = write_report({"protocol": protocol, **table.to_dict()}, run_dir, "completion")
+    summary = {"protocol": protocol, **table.to_dict(), "collision_kinds": kinds.to_dict()}
+    paths = write_report(summary, run_dir, "completion")
     head = "# Waypoint completion and where the missed waypoints go\n\n"
     lines = [f"- {k}: {v}" for k, v in protocol.items()]
-    paths["markdown"].write_text(head + "\n".join(lines) + "\n\n" + table.markdown() + "\n")
+    kinds_md = "## What the vehicle collisions are (`eval.collisions`)\n\n" + kinds.markdown()
+    body = table.markdown() + "\n\n" + kinds_md
+    paths["markdown"].write_text(head + "\n".join(lines) + "\n\n" + body + "\n")
     return paths
 
 

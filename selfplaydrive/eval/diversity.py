@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive.eval.collisions import collision_partner
 from selfplaydrive.eval.report import json_safe
-from selfplaydrive.eval.waymax_metrics import boxes_overlap
 from selfplaydrive.scenario.types import COEFF_NAMES
 
 __all__ = [
@@ -172,39 +172,14 @@ class DiversityRecorder:
         self._pair_exp += (n.T @ n - np.diag(n.sum(axis=0))) / 2.0
 
     def _collision(self, i: int, onset: np.ndarray) -> None:
-        st, A = self.env.state, self.env.agents_per_world
-        w = i // A
-        ego = np.array([[st.x[i], st.y[i], st.length[i], st.width[i], st.heading[i]]], dtype=np.float64)
-        a = np.arange(w * A, (w + 1) * A)
-        present = st.agent_valid[a].astype(bool) & (
-            st.active[a].astype(bool) | st.obstacle[a].astype(bool) | self.env.reward_mask[a]
-        )
-        a = a[present & (a != i)]
-        S = len(st.st_valid) // self.env.num_worlds
-        s = np.arange(w * S, (w + 1) * S)
-        s = s[st.st_valid[s].astype(bool)]
-        boxes = np.concatenate(
-            [
-                np.c_[st.x[a], st.y[a], st.length[a], st.width[a], st.heading[a]],
-                np.c_[
-                    st.st_x[s], st.st_y[s], st.st_len[s], st.st_wid[s], np.arctan2(st.st_sin[s], st.st_cos[s])
-                ],
-            ]
-        ).astype(np.float64)
-        if len(boxes) == 0:
-            return
-        dist = np.hypot(boxes[:, 0] - ego[0, 0], boxes[:, 1] - ego[0, 1])
-        hit = boxes_overlap(np.repeat(ego, len(boxes), axis=0), boxes)
-        k = int(np.argmin(np.where(hit, dist, np.inf))) if hit.any() else int(np.argmin(dist))
-        if k < len(a):
-            j = int(a[k])
+        coeffs = self.env.state.coeffs
+        what, j, overlap = collision_partner(self.env, i)
+        if what == "agent":
             if j < i and onset[j] & EV_COLLIDE:
                 return  # the pair was logged from the lower slot
-            self._coll.append(
-                (float(st.coeffs[i, C_COLL]), float(st.coeffs[j, C_COLL]), "agent", bool(hit[k]))
-            )
-        else:
-            self._coll.append((float(st.coeffs[i, C_COLL]), float("nan"), "static", bool(hit[k])))
+            self._coll.append((float(coeffs[i, C_COLL]), float(coeffs[j, C_COLL]), "agent", overlap))
+        elif what == "static":
+            self._coll.append((float(coeffs[i, C_COLL]), float("nan"), "static", overlap))
 
     def counts(self) -> tuple[int, int]:
         """(road-edge onsets, vehicle collisions) logged so far."""

@@ -25,7 +25,7 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -140,6 +140,7 @@ def completion_breakdown(
     world_episodes: int,
     seed: int | None = None,
     max_steps: int = 20_000,
+    recorders: Sequence[Any] = (),
 ) -> MissBreakdown:
     """Drive `env` with `policy(observations, env)` (e.g. `policies.make_policy`) from a reset
     until `world_episodes` world-episodes have ended (or `max_steps` env steps) and break their
@@ -151,6 +152,8 @@ def completion_breakdown(
         world_episodes: Finished world-episodes to count (at least 1).
         seed: Reset seed (None: the env's own).
         max_steps: Env steps at most.
+        recorders: Objects whose `record()` reads the env after every step (e.g.
+            `eval.collisions.CollisionRecorder`), so one rollout feeds several analyses.
     """
     if int(world_episodes) < 1:
         raise ValueError(f"world_episodes: expected >= 1, got {world_episodes!r}")
@@ -163,6 +166,8 @@ def completion_breakdown(
             policy.reset()
         for _ in range(int(max_steps)):
             env.step(policy(env.observations, env))
+            for rec in recorders:
+                rec.record()
             records += env.pop_episode_stats()
             if len(records) >= world_episodes:
                 break
