@@ -16,6 +16,7 @@ import pytest
 import selfplaydrive.conf
 from selfplaydrive.cli import main
 from selfplaydrive.errors import CheckpointError
+from selfplaydrive.eval.collisions import KINDS
 
 TINY_SUITES = ["eval.suites.turn_lanes=1", "eval.suites.stop_lines=1", "eval.suites.crosswalks=1"]
 # what the fake training run changes from the paper's env (and from experiment=laptop)
@@ -101,7 +102,7 @@ def test_eval_rule_based_writes_reports(tmp_path, capsys):
     assert "| vehicle_collision |" in (out / "completion.md").read_text()
     # the same rollout's vehicle collisions by kind (eval.collisions)
     kinds = done["collision_kinds"]
-    assert sum(kinds[k]["count"] for k in ("static", "rear_end", "crossing", "head_on")) == kinds["collisions"]
+    assert sum(kinds[k]["count"] for k in KINDS) == kinds["collisions"]
     assert "| head_on |" in (out / "completion.md").read_text()
     meta = json.loads((out / "run_meta.json").read_text())
     assert meta["seed"] == 0

@@ -12,6 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from selfplaydrive.cli import main  # noqa: E402
+from selfplaydrive.eval.collisions import KINDS  # noqa: E402
 from selfplaydrive.trainers.ppo.logging import WALL_CLOCK_TAGS  # noqa: E402
 
 # 1 world x 32 agent slots x 8 steps = 256 slot-steps per update; no lr annealing, so the first
@@ -67,6 +68,9 @@ def test_same_seed_same_run_and_another_seed_differs(tmp_path):
     summary = json.loads((a / "eval.json").read_text())
     assert summary["protocol"] == "fixed_eval_coefficients" and summary["actions"] == "sampled"
     assert "fixed_eval_coefficients" not in summary and "agent_episodes" in summary
+    # with its vehicle collisions by kind (eval.collisions)
+    kinds = summary["collision_kinds"]
+    assert sum(kinds[k]["count"] for k in KINDS) == kinds["collisions"]
 
 
 def test_a_conditioned_run_is_evaluated_under_both_protocols_unless_asked_not_to(tmp_path):
@@ -76,7 +80,7 @@ def test_a_conditioned_run_is_evaluated_under_both_protocols_unless_asked_not_to
     assert summary["protocol"] == "training_distribution" and summary["actions"] == "sampled"
     fixed = summary["fixed_eval_coefficients"]
     assert fixed["protocol"] == "fixed_eval_coefficients" and fixed["actions"] == "sampled"
-    assert "agent_episodes" in fixed
+    assert "agent_episodes" in fixed and "collision_kinds" in fixed
     off = train(tmp_path / "off", 1, "reward=paper", "trainer.eval_fixed_coefficients=false")
     assert "fixed_eval_coefficients" not in json.loads((off / "eval.json").read_text())
     # fixed coefficients with a curriculum on: the training worlds are not the protocol's either

@@ -231,17 +231,27 @@ def final_evaluation(trainer: PPOTrainer, env, cfg: PPOConfig) -> dict[str, obje
     paper's evaluation protocol (`scenario.protocol.paper_protocol`), nested under the key
     "fixed_eval_coefficients" (skipped for a spawner without a conditioning sampler, and for one
     that already follows that protocol: `reward=eval` without curricula). Each summary records
-    its protocol (`eval_protocol`)."""
+    its protocol (`eval_protocol`) and its vehicle collisions by kind (`collision_kinds`,
+    `eval.collisions`)."""
     seed = cfg.seed + EVAL_SEED_OFFSET + trainer.dist.rank
     args = (cfg.eval_episodes, cfg.eval_max_steps, cfg.eval_deterministic, seed)
-    summary: dict[str, object] = trainer.evaluate(*args)
+    summary = _evaluate(trainer, env, args)
     summary.update(eval_protocol(env, cfg.eval_deterministic))
     spawner = getattr(env, "spawner", None)
     if cfg.eval_fixed_coefficients and has_protocol(spawner) and not follows_protocol(spawner):
         with paper_protocol(spawner):  # evaluate() resets every world inside the block
-            fixed = trainer.evaluate(*args)
+            fixed = _evaluate(trainer, env, args)
             fixed.update(eval_protocol(env, cfg.eval_deterministic))
         summary["fixed_eval_coefficients"] = fixed
+    return summary
+
+
+def _evaluate(trainer: PPOTrainer, env, args: tuple[int, int, bool, int]) -> dict[str, object]:
+    from selfplaydrive.eval.collisions import CollisionRecorder
+
+    collisions = CollisionRecorder(env)
+    summary: dict[str, object] = dict(trainer.evaluate(*args, recorders=[collisions]))
+    summary["collision_kinds"] = collisions.breakdown().to_dict()
     return summary
 
 

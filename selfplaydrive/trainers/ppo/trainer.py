@@ -14,9 +14,10 @@ import os
 import time
 import warnings
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -604,10 +605,13 @@ class PPOTrainer:
     # ---------------------------------------------------------------------------------------
     # evaluation and checkpoints
     @torch.no_grad()
-    def evaluate(self, episodes: int, max_steps: int, deterministic: bool, seed: int) -> dict[str, float]:
+    def evaluate(
+        self, episodes: int, max_steps: int, deterministic: bool, seed: int, recorders: Sequence[Any] = ()
+    ) -> dict[str, float]:
         """Run the policy on fresh episodes (env reset with `seed`) until `episodes` world
         episodes ended or `max_steps` env steps; returns `episodes.summarize` of them. Training
-        afterwards starts from a fresh reset.
+        afterwards starts from a fresh reset. Each of `recorders` has its `record()` called after
+        every env step (e.g. `eval.collisions.CollisionRecorder`).
 
         Sampled actions come from `sample_gen`; with a rollout in hand (overlap_collection),
         from a copy of its state before that rollout, which later evaluations continue: an
@@ -619,6 +623,8 @@ class PPOTrainer:
         for _ in range(max_steps):
             _, actions, _, _, acted = self.act(deterministic, net=self.model, generator=generator)
             self.env_step(actions, acted, net=self.model)
+            for rec in recorders:
+                rec.record()
             r, g = self.tracker.pop()
             records += r
             returns += g
