@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fakeenv import one_world_env
 
 from selfplaydrive.eval.collisions import KINDS, CollisionBreakdown, CollisionRecorder, geometry
 
@@ -29,33 +30,16 @@ def test_geometry_from_headings(a, b, kind):
 def _fake_env() -> SimpleNamespace:
     """One world, 8 agent slots, 1 static vehicle. Pairs that overlap: 0-1 head-on (headings 0
     and pi), 2-3 rear-end (3 stands), 4-5 crossing; 6 overlaps the static vehicle; 7 is alone."""
-    N = 8
-    x = np.array([0.0, 4.0, 100.0, 104.0, 200.0, 202.0, 300.0, 900.0], np.float32)
-    y = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], np.float32)
-    st = SimpleNamespace(
+    return one_world_env(
+        (303.0, 1.0),
         events=np.array([1, 1, 1, 1, 1, 1, 1, 0], np.uint8),
-        x=x,
-        y=y,
-        length=np.full(N, 4.5, np.float32),
-        width=np.full(N, 2.0, np.float32),
+        x=np.array([0.0, 4.0, 100.0, 104.0, 200.0, 202.0, 300.0, 900.0], np.float32),
+        y=np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], np.float32),
         heading=np.array([0.0, np.pi, 0.0, 0.0, 0.0, np.pi / 2, 0.0, 0.0], np.float32),
         speed=np.array([8.0, 6.0, 9.0, 0.0, 5.0, 7.0, 3.0, 10.0], np.float32),
-        agent_valid=np.ones(N, np.uint8),
-        active=np.ones(N, np.uint8),
-        obstacle=np.zeros(N, np.uint8),
         lane_valid=np.array([1, 1, 1, 1, 1, 0, 1, 1], np.uint8),
         lane_alpha=np.array([0.0, 0.1, 0.0, 0.0, 1.2, 0.0, 0.05, 0.0], np.float32),
         lane_s=np.array([0.9, -0.8, 0.2, 0.1, 0.3, 0.0, 1.4, 0.0], np.float32),
-        st_valid=np.ones(1, np.uint8),
-        st_x=np.array([303.0], np.float32),
-        st_y=np.array([1.0], np.float32),
-        st_len=np.array([4.0], np.float32),
-        st_wid=np.array([2.0], np.float32),
-        st_cos=np.ones(1, np.float32),
-        st_sin=np.zeros(1, np.float32),
-    )
-    return SimpleNamespace(
-        state=st, reward_mask=np.ones(N, bool), num_agents=N, num_worlds=1, agents_per_world=N
     )
 
 

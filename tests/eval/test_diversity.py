@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from fakeenv import one_world_env
 
 from selfplaydrive.eval.diversity import DiversityLog, DiversityRecorder, analyse, save_diversity
 from selfplaydrive.scenario.types import COEFF_NAMES
@@ -91,30 +92,16 @@ def _fake_env() -> SimpleNamespace:
     coeffs[:, C_COLL] = [0.05, 0.95, 0.5, 0.3]
     coeffs[:, C_OFF] = [0.1, 0.2, 0.3, 0.75]
     coeffs[:, C_BIAS] = [0.1, -0.1, 0.2, 0.0]
-    st = SimpleNamespace(
+    return one_world_env(
+        (53.0, 0.5),
         events=np.array([1, 1, 1, 4], np.uint8),
         coeffs=coeffs,
         x=np.array([0.0, 3.0, 50.0, 200.0], np.float32),
         y=np.zeros(N, np.float32),
-        length=np.full(N, 4.5, np.float32),
-        width=np.full(N, 2.0, np.float32),
         heading=np.zeros(N, np.float32),
-        agent_valid=np.ones(N, np.uint8),
-        active=np.ones(N, np.uint8),
-        obstacle=np.zeros(N, np.uint8),
         lane_valid=np.array([1, 1, 0, 1], np.uint8),
         lane_alpha=np.array([0.0, 0.1, 0.0, 2.0], np.float32),
         lane_s=np.array([0.15, -0.2, 0.0, 0.4], np.float32),
-        st_valid=np.ones(1, np.uint8),
-        st_x=np.array([53.0], np.float32),
-        st_y=np.array([0.5], np.float32),
-        st_len=np.array([4.0], np.float32),
-        st_wid=np.array([2.0], np.float32),
-        st_cos=np.ones(1, np.float32),
-        st_sin=np.zeros(1, np.float32),
-    )
-    return SimpleNamespace(
-        state=st, reward_mask=np.ones(N, bool), num_agents=N, num_worlds=1, agents_per_world=N
     )
 
 
