@@ -12,10 +12,11 @@
   `dh` in [0, pi]: `rear_end` (dh <= `crossing_rad`, 0.5 rad: both drive the same way),
   `head_on` (dh >= `head_on_rad`, 2.6 rad: they meet from opposite directions), `crossing`
   (between: junction conflicts and merges);
-- both speeds after the step [m/s] (the collision penalty's `v`, section 2.3) and both lateral
-  offsets `lane_s` from the associated lane centre [m] (NaN without a lane within 60 deg), which
-  separate drift in a lane from conflicts on correct lines;
-- `stopped`: one of the two stood (speed < 0.5 m/s), so the other drove into it.
+- the faster vehicle's speed after the step [m/s] (the collision penalty's `v`, section 2.3)
+  and both cars' absolute lateral offsets `lane_s` from the associated lane centre [m] (NaN
+  without a lane within 60 deg), which separate drift in a lane from conflicts on correct lines;
+- `stopped`: one of the two agents stood (speed < 0.5 m/s), so the other drove into it; with a
+  static partner, the agent itself stood (it crept into the parked vehicle).
 
 `CollisionRecorder.breakdown()` sums the log into a `CollisionBreakdown` (counts, shares,
 medians per kind; `to_dict()`, `markdown()`). `selfplaydrive eval`'s completion analysis
@@ -93,7 +94,8 @@ class CollisionBreakdown:
         speed: (n,) the faster vehicle's speed after the step [m/s] (a static one's is 0).
         ego_offset, partner_offset: (n,) |lane_s| [m] of the logging agent and its partner
             (NaN: no lane within 60 deg, or a static partner).
-        stopped: (n,) bool, one of the two stood (< 0.5 m/s).
+        stopped: (n,) bool, one of the two agents stood (< 0.5 m/s); with a static partner,
+            the agent itself.
         overlap: (n,) bool, the partner's box overlapped at the event step.
     """
 
