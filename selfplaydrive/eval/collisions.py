@@ -33,12 +33,13 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive.eval.metrics import EVENT_BITS
 from selfplaydrive.eval.waymax_metrics import boxes_overlap
 
 __all__ = ["KINDS", "CollisionBreakdown", "CollisionRecorder", "collision_partner", "geometry"]
 
 KINDS = ("static", "rear_end", "crossing", "head_on")
-EV_COLLIDE = 1
+EV_COLLIDE = EVENT_BITS["vehicle"]
 STOPPED_SPEED = 0.5  # [m/s]
 _CENTER_MAX_ALPHA = np.pi / 3  # lane offsets only where the centre term is given (section 2.3)
 

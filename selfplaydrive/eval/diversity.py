@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from selfplaydrive.eval.collisions import collision_partner
+from selfplaydrive.eval.metrics import EVENT_BITS
 from selfplaydrive.eval.report import json_safe
 from selfplaydrive.scenario.types import COEFF_NAMES
 
@@ -53,7 +54,7 @@ __all__ = [
 ]
 
 C_COLL, C_OFF, C_BIAS = (COEFF_NAMES.index(n) for n in ("collision", "offroad", "center_bias"))
-EV_COLLIDE, EV_OFFROAD = 1, 4
+EV_COLLIDE, EV_OFFROAD = EVENT_BITS["vehicle"], EVENT_BITS["road_edge"]
 COEFF_BINS = np.linspace(0.0, 1.0, 11)  # 0.1 wide, the paper's "< 0.1" statements
 BIAS_BINS = np.linspace(-0.3, 0.3, 13)  # B ~ U(-0.3, 0.3) [m]
 
