@@ -16,6 +16,8 @@ Per map:
    worlds, training curricula of `PaperSpawner`, are switched off: the paper's spawner).
    Completion is reached waypoints over assigned ones; the collision and road-edge rates are the
    share of agents with at least one such contact.
+   Each row also splits its vehicle collisions by partner and geometry (parked vehicle,
+   rear-end, crossing, head-on: `selfplaydrive.eval.collisions`, recorded in the same rollout).
    For the run's spawner and greedy actions, `selfplaydrive.eval.misses` also charges every
    missed waypoint to how its agent ended (vehicle, pedestrian, road edge, off route, still
    pending), in rollouts of its own from the same reset seed.
@@ -68,6 +70,7 @@ def completion_eval(
 
     from selfplaydrive import pretrained
     from selfplaydrive.builder import build_env, build_model, instantiate
+    from selfplaydrive.eval.collisions import CollisionRecorder
     from selfplaydrive.policies import find_run_config, load_checkpoint
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
@@ -80,10 +83,12 @@ def completion_eval(
     model.load_state_dict(load_checkpoint(checkpoint)["model"])
     with tempfile.TemporaryDirectory() as scratch:
         trainer = PPOTrainer(env, model, instantiate(cfg.trainer), scratch)
+        recorder = CollisionRecorder(env)
         start = time.perf_counter()
         with torch.inference_mode():
-            out = trainer.evaluate(episodes, 5000, deterministic, int(cfg.seed) + EVAL_SEED_OFFSET)
-    row: dict[str, Any] = {}
+            seed = int(cfg.seed) + EVAL_SEED_OFFSET
+            out = trainer.evaluate(episodes, 5000, deterministic, seed, recorders=[recorder])
+    row: dict[str, Any] = {"collision_kinds": recorder.breakdown().to_dict()}
     if misses:
         from selfplaydrive.eval.misses import completion_breakdown
         from selfplaydrive.policies import make_policy
@@ -187,6 +192,7 @@ def markdown(report: dict[str, Any]) -> str:
                 f"| {r.get('collision_rate', float('nan')):.3f} | {r.get('offroad_rate', float('nan')):.3f} "
                 f"| {r.get('km', 0.0):.1f} | {r['wall_s']} |"
             )
+        lines += kind_lines(rep["completion"])
         lines += miss_lines(rep["completion"])
         ev = rep["eval"]
         turn, lf = ev["turn_lanes"], ev["longform"]
@@ -205,6 +211,31 @@ def markdown(report: dict[str, Any]) -> str:
         ]
     lines += ["## Targets (issue #16 item 3)", "", *target_lines(report), ""]
     return "\n".join(lines)
+
+
+def kind_lines(rows: list[dict[str, Any]]) -> list[str]:
+    """The vehicle collisions of each completion row by kind (`eval.collisions`); none for a
+    report written before the rows recorded them."""
+    from selfplaydrive.eval.collisions import KINDS
+
+    rows = [r for r in rows if "collision_kinds" in r]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "Vehicle collisions by kind (`selfplaydrive.eval.collisions`, the same rollouts; an agent "
+        "pair counted once; static: a parked vehicle):",
+        "",
+        "| agents per world | actions | collisions | " + " | ".join(KINDS) + " |",
+        "|---|---|---|" + "---|" * len(KINDS),
+    ]
+    for r in rows:
+        kinds = r["collision_kinds"]
+        shares = " | ".join(
+            f"{kinds[k]['count']} ({pct(kinds[k]['share'])})" if kinds["collisions"] else "0" for k in KINDS
+        )
+        lines.append(f"| {r['agents_per_world']} | {r['actions']} | {kinds['collisions']} | {shares} |")
+    return lines
 
 
 def miss_lines(rows: list[dict[str, Any]]) -> list[str]:

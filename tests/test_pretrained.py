@@ -191,3 +191,40 @@ def test_evaluation_config_sets_up_the_papers_protocol(tmp_path):
     other["obs"]["max_road"] = 17
     (tmp_path / "resolved_config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(other)))
     assert pretrained.evaluation_config(obs_from=tmp_path / "resolved_config.yaml").obs.max_road == 17
+
+
+def _report_script():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "pretrained_report.py"
+    spec = importlib.util.spec_from_file_location("pretrained_report", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_report_rows_record_collision_kinds_and_the_markdown_tables_them():
+    """`benchmarks/pretrained_report.py`: each completion row holds its vehicle collisions by
+    kind, from the same rollout as its rates, and REPORT.md tables them."""
+    from selfplaydrive.eval.collisions import KINDS
+
+    report = _report_script()
+    row = report.completion_eval("default", 4, 1, False, pretrained.checkpoint_path())
+    kinds = row["collision_kinds"]
+    assert row["agents_per_world"] == 4 and set(KINDS) <= set(kinds)
+    assert kinds["collisions"] == sum(kinds[k]["count"] for k in KINDS)
+    made = {
+        "collisions": 5,
+        **{k: {"count": c, "share": c / 5} for k, c in zip(KINDS, (2, 0, 3, 0), strict=True)},
+    }
+    none = {"collisions": 0, **{k: {"count": 0, "share": float("nan")} for k in KINDS}}
+    rows = [
+        {"agents_per_world": 16, "actions": "sampled", "collision_kinds": made},
+        {"agents_per_world": 32, "actions": "greedy", "collision_kinds": none},
+        {"agents_per_world": 32, "actions": "sampled"},  # a report written before the kinds
+    ]
+    lines = report.kind_lines(rows)
+    assert "| 16 | sampled | 5 | 2 (40.0 %) | 0 (0.0 %) | 3 (60.0 %) | 0 (0.0 %) |" in lines
+    assert "| 32 | greedy | 0 | 0 | 0 | 0 | 0 |" in lines
+    assert len([x for x in lines if x.startswith("| 32")]) == 1
+    assert report.kind_lines(rows[2:]) == []
