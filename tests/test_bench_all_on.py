@@ -3,20 +3,17 @@ every variant against the paper configuration (docs/benchmarks.md "Every new com
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
+from loadfile import load_file
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_all_on.py"
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_all_on", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(SCRIPT, "bench_all_on")
 
 
 def test_variants_switch_on_every_component(bench):

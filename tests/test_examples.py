@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from loadfile import load_file
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 TERMS = ("waypoint", "collision", "offroad", "red_light", "comfort", "center", "align", "velocity")
@@ -40,14 +41,7 @@ def run_example(name: str, tmp_path: Path, via_env: bool = False, timeout: float
 
 def load_example(name: str):
     """Import examples/<name> as a module (the file names start with digits)."""
-    spec = importlib.util.spec_from_file_location(f"example_{name[:2]}", EXAMPLES / name)
-    module = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(EXAMPLES))
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(EXAMPLES))
-    return module
+    return load_file(EXAMPLES / name, f"example_{name[:2]}")
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from loadfile import load_file
 
 from selfplaydrive import pretrained
 from selfplaydrive.errors import CheckpointError
@@ -194,13 +195,7 @@ def test_evaluation_config_sets_up_the_papers_protocol(tmp_path):
 
 
 def _report_script():
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "pretrained_report.py"
-    spec = importlib.util.spec_from_file_location("pretrained_report", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(ROOT / "benchmarks" / "pretrained_report.py", "pretrained_report")
 
 
 def test_report_rows_record_collision_kinds_and_the_markdown_tables_them():

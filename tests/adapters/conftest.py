@@ -3,10 +3,8 @@ hand-built scenarios of tests/sim/helpers.py (loaded by path: it is not a packag
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
+from loadfile import ROOT, load_file
 
 from selfplaydrive.maps import compile_map
 from selfplaydrive.scenario._testmaps import grid_elements
@@ -16,11 +14,7 @@ from selfplaydrive.sim import VecEnv
 
 def load_sim_helpers():
     """tests/sim/helpers.py as a module named `sim_helpers`."""
-    path = Path(__file__).resolve().parents[1] / "sim" / "helpers.py"
-    spec = importlib.util.spec_from_file_location("sim_helpers", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
 
 
 @pytest.fixture(scope="session")

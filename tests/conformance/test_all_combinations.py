@@ -21,15 +21,13 @@ single-agent and parallel adapters' checkers with the default components.
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
-import sys
 import warnings
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 import pytest
+from loadfile import ROOT, load_file
 
 from selfplaydrive.builder import build_env, compose, valid_options
 
@@ -191,15 +189,7 @@ def reward_term(form: str):
     if form == "python":
         return SpeedLimit()
     pytest.importorskip("numba")
-    path = Path(__file__).resolve().parents[2] / "examples" / "07_term_numba.py"
-    spec = importlib.util.spec_from_file_location("term_numba_example", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(path.parent))  # the example imports its sibling _terms.py
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(path.parent))
+    module = load_file(ROOT / "examples" / "07_term_numba.py", "term_numba_example")
     return module.speed_limit_term()
 
 

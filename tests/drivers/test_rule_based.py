@@ -4,12 +4,11 @@ rates on the bundled map far below random actions."""
 
 from __future__ import annotations
 
-import importlib.util
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from loadfile import ROOT, load_file
 
 from selfplaydrive.drivers import DriverParams, RandomDriver, RuleBasedDriver, StaticDriver
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, TrafficLightElement, compile_map
@@ -22,11 +21,7 @@ COLLIDE, OFFROAD, RED = 1, 4, 8  # event bits (docs/world.md)
 
 
 def _helpers():
-    path = Path(__file__).resolve().parents[1] / "sim" / "helpers.py"
-    spec = importlib.util.spec_from_file_location("sim_helpers", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
 
 
 H = _helpers()

@@ -11,6 +11,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from loadfile import ROOT, load_file
 from sharedmaps import shared_map
 
 from selfplaydrive.errors import MapError
@@ -274,13 +275,8 @@ def test_real_default_map():
 
 def test_bench_maps_smoke(straight_map, tmp_path, capsys):
     """benchmarks/bench_maps.py runs end to end (tiny sizes), so it cannot rot unnoticed."""
-    import importlib.util
-    from pathlib import Path
 
-    script = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_maps.py"
-    spec = importlib.util.spec_from_file_location("bench_maps", script)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_file(ROOT / "benchmarks" / "bench_maps.py", "bench_maps")
     path = save_roadmap(straight_map, tmp_path / "s.npz")
     argv = ["--map", str(path), "--repeat", "1", "--load-repeat", "2", "--queries", "500", "--radius", "30"]
     assert bench.main(argv) == 0

@@ -4,10 +4,9 @@ a straight two-lane road with a STOP line, a YIELD line and two crosswalks."""
 from __future__ import annotations
 
 import copy
-import importlib.util
-from pathlib import Path
 
 import numpy as np
+from loadfile import ROOT, load_file
 
 from selfplaydrive.maps import (
     CrosswalkElement,
@@ -22,12 +21,7 @@ from selfplaydrive.maps import (
 
 def _helpers():
     """tests/sim/helpers.py (make_scenario), loaded by path: tests/ is not a package."""
-    path = Path(__file__).resolve().parents[1] / "sim" / "helpers.py"
-    spec = importlib.util.spec_from_file_location("sim_helpers", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
 
 
 make_scenario = _helpers().make_scenario

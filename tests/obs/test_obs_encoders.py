@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from loadfile import load_file
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.maps.procedural import ProceduralTownLoader
@@ -47,11 +48,8 @@ def rollout(town, obs, threads=1, steps=20, worlds=3, **kw):
 @pytest.fixture(scope="module")
 def example09():
     pytest.importorskip("numba")
-    spec = importlib.util.spec_from_file_location("example_09", EXAMPLES / "09_encoder_numba.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["example_09"] = module  # Hydra's _target_ names the module
-    spec.loader.exec_module(module)
-    return module
+    # registered in sys.modules: the Hydra _target_ of the test names the module
+    return load_file(EXAMPLES / "09_encoder_numba.py", "example_09", register=True)
 
 
 @pytest.fixture(scope="module")

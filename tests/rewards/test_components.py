@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from loadfile import load_file
 
 import selfplaydrive
 from selfplaydrive.builder import build_env, compose
@@ -59,13 +60,7 @@ def cython_term(tmp_path_factory):
 @pytest.fixture(scope="module")
 def numba_term():
     pytest.importorskip("numba")
-    sys.path.insert(0, str(EXAMPLES))
-    try:
-        spec = importlib.util.spec_from_file_location("example_07", EXAMPLES / "07_term_numba.py")
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(EXAMPLES))
+    module = load_file(EXAMPLES / "07_term_numba.py", "example_07")
     return module.speed_limit_term(COEF, LIMIT)
 
 

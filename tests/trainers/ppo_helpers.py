@@ -3,12 +3,11 @@ per world on the middle lane, waypoints ahead on its centre, and a tiny policy f
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import torch
+from loadfile import ROOT, load_file
 from torch import nn
 
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, compile_map
@@ -193,11 +192,7 @@ class SpeedValueModel(nn.Module):
 
 def load_benchmark(name: str) -> ModuleType:
     """The script benchmarks/<name>.py as a module (the benchmarks are no package)."""
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file(ROOT / "benchmarks" / f"{name}.py", name)
 
 
 # small PPO settings for the checkpoint and resume tests: a checkpoint every 2 updates
