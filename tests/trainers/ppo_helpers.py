@@ -7,7 +7,6 @@ from types import ModuleType
 
 import numpy as np
 import torch
-from loadfile import ROOT, load_file
 from torch import nn
 
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, compile_map
@@ -192,6 +191,10 @@ class SpeedValueModel(nn.Module):
 
 def load_benchmark(name: str) -> ModuleType:
     """The script benchmarks/<name>.py as a module (the benchmarks are no package)."""
+    # imported here: torchrun workers (ddp_worker.py) import this module with only
+    # tests/trainers on sys.path, where tests/loadfile.py is not found
+    from loadfile import ROOT, load_file
+
     return load_file(ROOT / "benchmarks" / f"{name}.py", name)
 
 
