@@ -24,6 +24,7 @@ import argparse
 import json
 import math
 import re
+import statistics
 import subprocess
 import sys
 import time
@@ -68,15 +69,15 @@ def train_argv(out: Path, setting: Setting, seed: int) -> list[str]:
     ]  # fmt: skip
 
 
-def train_all(out: Path, settings: list[Setting], seeds: list[int], parallel: int) -> list[str]:
+def train_all(out: Path, settings: list[Setting], seeds: list[int], parallel: int) -> dict[str, int]:
     """Train the pairs without an `eval.json`, at most `parallel` at a time, in seed-major order
-    (every setting's seed 0 first), so an early look already compares like with like. Returns
-    one line per finished run (its exit code and minutes)."""
+    (every setting's seed 0 first), so an early look already compares like with like. Prints a
+    line per finished run and returns each run folder's name with its exit code."""
     todo = [
         (s, seed) for seed in seeds for s in settings if not (run_dir(out, s, seed) / "eval.json").is_file()
     ]
     running: list[tuple[subprocess.Popen, Path, float, Any]] = []
-    done = []
+    done: dict[str, int] = {}
     while todo or running:
         while todo and len(running) < parallel:
             setting, seed = todo.pop(0)
@@ -90,9 +91,9 @@ def train_all(out: Path, settings: list[Setting], seeds: list[int], parallel: in
             proc, folder, start, log = item
             log.close()
             running.remove(item)
-            line = f"{folder.name}: exit {proc.returncode}, {(time.monotonic() - start) / 60:.1f} min"
-            print(line, file=sys.stderr, flush=True)
-            done.append(line)
+            minutes = (time.monotonic() - start) / 60
+            print(f"{folder.name}: exit {proc.returncode}, {minutes:.1f} min", file=sys.stderr, flush=True)
+            done[folder.name] = proc.returncode
     return done
 
 
@@ -141,13 +142,11 @@ def _cell(row: dict[str, float] | None) -> str:
 
 def mean_se(values: list[float]) -> tuple[float, float]:
     """Mean and its standard error (nan with fewer than two values)."""
-    n = len(values)
-    if n == 0:
+    if not values:
         return math.nan, math.nan
-    m = sum(values) / n
-    if n < 2:
-        return m, math.nan
-    return m, math.sqrt(sum((v - m) ** 2 for v in values) / (n - 1) / n)
+    if len(values) < 2:
+        return values[0], math.nan
+    return statistics.fmean(values), statistics.stdev(values) / math.sqrt(len(values))
 
 
 def tables(out: Path, settings: list[Setting], seeds: list[int]) -> str:
@@ -223,13 +222,11 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     failed = []
     if not args.table_only:
-        failed = [
-            line for line in train_all(out, settings, args.seeds, args.parallel) if ": exit 0," not in line
-        ]
+        failed = [name for name, code in train_all(out, settings, args.seeds, args.parallel).items() if code]
     print(tables(out, settings, args.seeds))
     if failed:
         print(
-            f"{len(failed)} run(s) failed, their logs are beside the run folders:",
+            f"{len(failed)} run(s) failed, their logs (NAME.log) are beside the run folders:",
             *failed,
             sep="\n",
             file=sys.stderr,

@@ -38,3 +38,8 @@ def load_file(path: Path | str, name: str, *, register: bool = False) -> ModuleT
     finally:
         sys.path.remove(str(path.parent))
     return module
+
+
+def load_sim_helpers() -> ModuleType:
+    """tests/sim/helpers.py (make_scenario and friends) as the module `sim_helpers`."""
+    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")

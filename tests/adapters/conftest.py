@@ -4,17 +4,12 @@ hand-built scenarios of tests/sim/helpers.py (loaded by path: it is not a packag
 from __future__ import annotations
 
 import pytest
-from loadfile import ROOT, load_file
+from loadfile import load_sim_helpers
 
 from selfplaydrive.maps import compile_map
 from selfplaydrive.scenario._testmaps import grid_elements
 from selfplaydrive.scenario.spawner import PaperSpawner
 from selfplaydrive.sim import VecEnv
-
-
-def load_sim_helpers():
-    """tests/sim/helpers.py as a module named `sim_helpers`."""
-    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
 
 
 @pytest.fixture(scope="session")

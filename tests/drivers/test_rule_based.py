@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
-from loadfile import ROOT, load_file
+from loadfile import load_sim_helpers
 
 from selfplaydrive.drivers import DriverParams, RandomDriver, RuleBasedDriver, StaticDriver
 from selfplaydrive.maps import LaneElement, MapElements, PolylineElement, TrafficLightElement, compile_map
@@ -20,11 +20,7 @@ W = 3.5  # [m] lane width
 COLLIDE, OFFROAD, RED = 1, 4, 8  # event bits (docs/world.md)
 
 
-def _helpers():
-    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
-
-
-H = _helpers()
+H = load_sim_helpers()
 
 
 def _road(light_at: float | None = None):

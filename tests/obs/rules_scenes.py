@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from loadfile import ROOT, load_file
+from loadfile import load_sim_helpers
 
 from selfplaydrive.maps import (
     CrosswalkElement,
@@ -18,13 +18,7 @@ from selfplaydrive.maps import (
     compile_map,
 )
 
-
-def _helpers():
-    """tests/sim/helpers.py (make_scenario), loaded by path: tests/ is not a package."""
-    return load_file(ROOT / "tests" / "sim" / "helpers.py", "sim_helpers")
-
-
-make_scenario = _helpers().make_scenario
+make_scenario = load_sim_helpers().make_scenario
 
 W = 3.5  # [m] lane width
 STOP_MID = (20.0, -W / 2)  # STOP line across the east lane at x = 20
