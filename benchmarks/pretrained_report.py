@@ -224,18 +224,25 @@ def kind_lines(rows: list[dict[str, Any]]) -> list[str]:
     lines = [
         "",
         "Vehicle collisions by kind (`selfplaydrive.eval.collisions`, the same rollouts; an agent "
-        "pair counted once; static: a parked vehicle):",
+        "pair counted once; static: a parked vehicle; at a junction: either car on a junction lane):",
         "",
         "| agents per world | actions | collisions | " + " | ".join(KINDS) + " |",
         "|---|---|---|" + "---|" * len(KINDS),
     ]
     for r in rows:
         kinds = r["collision_kinds"]
-        shares = " | ".join(
-            f"{kinds[k]['count']} ({pct(kinds[k]['share'])})" if kinds["collisions"] else "0" for k in KINDS
-        )
+        shares = " | ".join(_kind_cell(kinds[k]) if kinds["collisions"] else "0" for k in KINDS)
         lines.append(f"| {r['agents_per_world']} | {r['actions']} | {kinds['collisions']} | {shares} |")
     return lines
+
+
+def _kind_cell(kind: dict[str, Any]) -> str:
+    """The count and share of one kind, with how many were at a junction where the row recorded it."""
+    cell = f"{kind['count']} ({pct(kind['share'])}"
+    junction = kind.get("share_junction")
+    if junction is not None and kind["count"]:
+        cell += f"; {round(junction * kind['count'])} at a junction"
+    return cell + ")"
 
 
 def miss_lines(rows: list[dict[str, Any]]) -> list[str]:

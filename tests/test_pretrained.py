@@ -208,10 +208,13 @@ def test_report_rows_record_collision_kinds_and_the_markdown_tables_them():
     kinds = row["collision_kinds"]
     assert row["agents_per_world"] == 4 and set(KINDS) <= set(kinds)
     assert kinds["collisions"] == sum(kinds[k]["count"] for k in KINDS)
+    assert all(0.0 <= kinds[k]["share_junction"] <= 1.0 for k in KINDS if kinds[k]["count"])
     made = {
         "collisions": 5,
         **{k: {"count": c, "share": c / 5} for k, c in zip(KINDS, (2, 0, 3, 0), strict=True)},
     }
+    made["head_on"] = {"count": 0, "share": 0.0, "share_junction": float("nan")}
+    made["crossing"]["share_junction"] = 2 / 3
     none = {"collisions": 0, **{k: {"count": 0, "share": float("nan")} for k in KINDS}}
     rows = [
         {"agents_per_world": 16, "actions": "sampled", "collision_kinds": made},
@@ -219,7 +222,9 @@ def test_report_rows_record_collision_kinds_and_the_markdown_tables_them():
         {"agents_per_world": 32, "actions": "sampled"},  # a report written before the kinds
     ]
     lines = report.kind_lines(rows)
-    assert "| 16 | sampled | 5 | 2 (40.0 %) | 0 (0.0 %) | 3 (60.0 %) | 0 (0.0 %) |" in lines
+    # crossing recorded where its collisions were (2 of 3 at a junction); static (an older
+    # row format) did not; head-on had none
+    assert "| 16 | sampled | 5 | 2 (40.0 %) | 0 (0.0 %) | 3 (60.0 %; 2 at a junction) | 0 (0.0 %) |" in lines
     assert "| 32 | greedy | 0 | 0 | 0 | 0 | 0 |" in lines
     assert len([x for x in lines if x.startswith("| 32")]) == 1
     assert report.kind_lines(rows[2:]) == []

@@ -16,7 +16,10 @@
   and both cars' absolute lateral offsets `lane_s` from the associated lane centre [m] (NaN
   without a lane within 60 deg), which separate drift in a lane from conflicts on correct lines;
 - `stopped`: one of the two agents stood (speed < 0.5 m/s), so the other drove into it; with a
-  static partner, the agent itself stood (it crept into the parked vehicle).
+  static partner, the agent itself stood (it crept into the parked vehicle);
+- `junction`: either car is on a junction lane (its lane as `eval.edge_contacts.car_lane` finds
+  it: the nearest lane centre heading within 45 deg, within 5 m), which tells conflicts inside
+  junctions (turns across oncoming traffic, crossing paths) from those on ordinary roads.
 
 `CollisionRecorder.breakdown()` sums the log into a `CollisionBreakdown` (counts, shares,
 medians per kind; `to_dict()`, `markdown()`). `selfplaydrive eval`'s completion analysis
@@ -33,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive.eval.edge_contacts import MapGeometry, car_lane
 from selfplaydrive.eval.metrics import EVENT_BITS
 from selfplaydrive.eval.waymax_metrics import boxes_overlap
 
@@ -98,6 +102,7 @@ class CollisionBreakdown:
         stopped: (n,) bool, one of the two agents stood (< 0.5 m/s); with a static partner,
             the agent itself.
         overlap: (n,) bool, the partner's box overlapped at the event step.
+        junction: (n,) bool, either car was on a junction lane.
     """
 
     kind: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype="<U8"))
@@ -106,10 +111,11 @@ class CollisionBreakdown:
     partner_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stopped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     overlap: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    junction: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __post_init__(self) -> None:
         n = len(self.kind)
-        for name in ("speed", "ego_offset", "partner_offset", "stopped", "overlap"):
+        for name in ("speed", "ego_offset", "partner_offset", "stopped", "overlap", "junction"):
             if len(getattr(self, name)) != n:
                 raise ValueError(
                     f"CollisionBreakdown.{name}: expected {n} entries (as kind), "
@@ -120,7 +126,8 @@ class CollisionBreakdown:
             raise ValueError(f"CollisionBreakdown.kind: unknown kinds {unknown}, expected any of {KINDS}")
 
     def to_dict(self) -> dict[str, Any]:
-        """Per kind: count, share of all collisions, medians of speed and offsets, share stopped."""
+        """Per kind: count, share of all collisions, medians of speed and offsets, shares stopped
+        and at a junction."""
         n = len(self.kind)
         out: dict[str, Any] = {"collisions": n}
         for k in KINDS:
@@ -132,6 +139,7 @@ class CollisionBreakdown:
                 "median_ego_offset": _median(self.ego_offset[m]),
                 "median_partner_offset": _median(self.partner_offset[m]),
                 "share_stopped": float(self.stopped[m].mean()) if m.any() else float("nan"),
+                "share_junction": float(self.junction[m].mean()) if m.any() else float("nan"),
             }
         return out
 
@@ -142,15 +150,15 @@ class CollisionBreakdown:
             f"Vehicle collisions: {d['collisions']} (an agent pair counted once)",
             "",
             "| kind | count | share | median speed [m/s] | median abs lane offset, agent / partner [m] "
-            "| one stood |",
-            "|---|---|---|---|---|---|",
+            "| one stood | at a junction |",
+            "|---|---|---|---|---|---|---|",
         ]
         for k in KINDS:
             r = d[k]
             lines.append(
                 f"| {k} | {r['count']} | {_fmt(100 * r['share'], 1)} % | {_fmt(r['median_speed'], 1)} | "
                 f"{_fmt(r['median_ego_offset'], 2)} / {_fmt(r['median_partner_offset'], 2)} | "
-                f"{_fmt(100 * r['share_stopped'], 0)} % |"
+                f"{_fmt(100 * r['share_stopped'], 0)} % | {_fmt(100 * r['share_junction'], 0)} % |"
             )
         return "\n".join(lines)
 
@@ -168,7 +176,7 @@ class CollisionRecorder:
     """Log the vehicle-collision onsets of a `VecEnv`; call `record()` after every `env.step`.
 
     Args:
-        env: The `VecEnv` (read only: `state` views, `reward_mask`).
+        env: The `VecEnv` (read only: `state` views, `reward_mask`, `maps`).
         crossing_rad: Heading difference [rad] above which two agents cross (not rear-end).
         head_on_rad: Heading difference [rad] from which two agents meet head-on.
     """
@@ -182,7 +190,8 @@ class CollisionRecorder:
         self.env = env
         self.crossing_rad, self.head_on_rad = float(crossing_rad), float(head_on_rad)
         self._prev = np.zeros(env.num_agents, dtype=np.uint8)
-        self._rows: list[tuple[str, float, float, float, bool, bool]] = []
+        self._geoms = [MapGeometry.of(m) for m in env.maps]
+        self._rows: list[tuple[str, float, float, float, bool, bool, bool]] = []
 
     def record(self) -> None:
         """Read the step just taken."""
@@ -198,6 +207,15 @@ class CollisionRecorder:
         ok = st.lane_valid[i] and abs(float(st.lane_alpha[i])) < _CENTER_MAX_ALPHA
         return abs(float(st.lane_s[i])) if ok else float("nan")
 
+    def _on_junction(self, *slots: int) -> bool:
+        st = self.env.state
+        geom = self._geoms[int(st.map_id[slots[0] // self.env.agents_per_world])]
+        for i in slots:
+            lane = car_lane(geom, np.array([st.x[i], st.y[i]]), float(st.heading[i]))
+            if lane >= 0 and geom.in_junction[lane]:
+                return True
+        return False
+
     def _log(self, i: int, onset: np.ndarray) -> None:
         st = self.env.state
         what, j, overlap = collision_partner(self.env, i)
@@ -205,21 +223,31 @@ class CollisionRecorder:
             return
         v = float(st.speed[i])
         if what == "static":
-            self._rows.append(("static", v, self._offset(i), float("nan"), v < STOPPED_SPEED, overlap))
+            self._rows.append(
+                ("static", v, self._offset(i), float("nan"), v < STOPPED_SPEED, overlap, self._on_junction(i))
+            )
             return
         if j < i and onset[j] & EV_COLLIDE:
             return  # the pair was logged from the lower slot
         vj = float(st.speed[j])
         kind = geometry(st.heading[i], st.heading[j], self.crossing_rad, self.head_on_rad)
         self._rows.append(
-            (kind, max(v, vj), self._offset(i), self._offset(j), min(v, vj) < STOPPED_SPEED, overlap)
+            (
+                kind,
+                max(v, vj),
+                self._offset(i),
+                self._offset(j),
+                min(v, vj) < STOPPED_SPEED,
+                overlap,
+                self._on_junction(i, j),
+            )
         )
 
     def breakdown(self) -> CollisionBreakdown:
         """Everything logged so far."""
         if not self._rows:
             return CollisionBreakdown()
-        kind, speed, ego, partner, stopped, overlap = zip(*self._rows, strict=True)
+        kind, speed, ego, partner, stopped, overlap, junction = zip(*self._rows, strict=True)
         return CollisionBreakdown(
             kind=np.array(kind),
             speed=np.array(speed, dtype=np.float64),
@@ -227,4 +255,5 @@ class CollisionRecorder:
             partner_offset=np.array(partner, dtype=np.float64),
             stopped=np.array(stopped, dtype=bool),
             overlap=np.array(overlap, dtype=bool),
+            junction=np.array(junction, dtype=bool),
         )

@@ -92,6 +92,20 @@ def _distances(p: np.ndarray, start: np.ndarray, direction: np.ndarray, length: 
     return np.linalg.norm(start + t[:, None] * direction - p, axis=1)
 
 
+def car_lane(geom: MapGeometry, xy: np.ndarray, heading: float, lane_radius: float = 5.0) -> int:
+    """The lane of a car at `xy` [m] heading `heading` [rad]: the owner of the nearest lane-centre
+    segment among those heading within 45 degrees of the car, if within `lane_radius` [m]; -1
+    otherwise (module docstring)."""
+    if not len(geom.lane_len):
+        return -1
+    p = np.asarray(xy, dtype=np.float64)
+    u = np.array([np.cos(heading), np.sin(heading)])
+    aligned = geom.lane_dir @ u > np.cos(LANE_HEADING_TOLERANCE)
+    d = np.where(aligned, _distances(p, geom.lane_start, geom.lane_dir, geom.lane_len), np.inf)
+    k = int(np.argmin(d))
+    return int(geom.lane_owner[k]) if d[k] <= lane_radius else -1
+
+
 def classify_onset(
     geom: MapGeometry,
     xy: np.ndarray,
@@ -104,13 +118,7 @@ def classify_onset(
     `heading` [rad] (module docstring)."""
     p = np.asarray(xy, dtype=np.float64)
     u = np.array([np.cos(heading), np.sin(heading)])
-    lane = -1
-    if len(geom.lane_len):
-        aligned = geom.lane_dir @ u > np.cos(LANE_HEADING_TOLERANCE)
-        d = np.where(aligned, _distances(p, geom.lane_start, geom.lane_dir, geom.lane_len), np.inf)
-        k = int(np.argmin(d))
-        if d[k] <= lane_radius:
-            lane = int(geom.lane_owner[k])
+    lane = car_lane(geom, p, heading, lane_radius)
     if lane >= 0 and geom.dead_end[lane] and np.linalg.norm(geom.lane_end[lane] - p) <= end_radius:
         return "dead_end"
     if len(geom.edge_len):

@@ -9,6 +9,19 @@ import pytest
 from fakeenv import one_world_env
 
 from selfplaydrive.eval.collisions import KINDS, CollisionBreakdown, CollisionRecorder, geometry
+from selfplaydrive.maps.compile import compile_map
+from selfplaydrive.maps.elements import LaneElement, MapElements
+
+
+def straight_road():
+    """Lanes along y = 0 heading +x: 0 (x -50..150) -> 1 (150..250, a junction lane) -> 2
+    (250..1000)."""
+    xs = [(-50.0, 150.0, False), (150.0, 250.0, True), (250.0, 1000.0, False)]
+    lanes = [
+        LaneElement(np.array([[a, 0.0], [b, 0.0]]), 3.5, 14.0, successors=[k + 1][: 2 - k], in_junction=j)
+        for k, (a, b, j) in enumerate(xs)
+    ]
+    return compile_map(MapElements(name="straight", source="tests/eval/test_collisions.py", lanes=lanes))
 
 
 @pytest.mark.parametrize(
@@ -28,9 +41,11 @@ def test_geometry_from_headings(a, b, kind):
 
 
 def _fake_env() -> SimpleNamespace:
-    """One world, 8 agent slots, 1 static vehicle. Pairs that overlap: 0-1 head-on (headings 0
-    and pi), 2-3 rear-end (3 stands), 4-5 crossing; 6 overlaps the static vehicle; 7 is alone."""
-    return one_world_env(
+    """One world on `straight_road` (positions below in source coordinates), 8 agent slots, 1
+    static vehicle. Pairs that overlap: 0-1 head-on (headings 0 and pi), 2-3 rear-end (3
+    stands), 4-5 crossing, on the junction lane (x 150..250); 6 overlaps the static vehicle;
+    7 is alone."""
+    env = one_world_env(
         (303.0, 1.0),
         events=np.array([1, 1, 1, 1, 1, 1, 1, 0], np.uint8),
         x=np.array([0.0, 4.0, 100.0, 104.0, 200.0, 202.0, 300.0, 900.0], np.float32),
@@ -41,6 +56,14 @@ def _fake_env() -> SimpleNamespace:
         lane_alpha=np.array([0.0, 0.1, 0.0, 0.0, 1.2, 0.0, 0.05, 0.0], np.float32),
         lane_s=np.array([0.9, -0.8, 0.2, 0.1, 0.3, 0.0, 1.4, 0.0], np.float32),
     )
+    road = straight_road()
+    origin = road.lanes.centerlines[0][0].astype(np.float64) + np.array([50.0, 0.0])  # source (0, 0)
+    st = env.state
+    st.x, st.y = (st.x + origin[0]).astype(np.float32), (st.y + origin[1]).astype(np.float32)
+    st.st_x, st.st_y = (st.st_x + origin[0]).astype(np.float32), (st.st_y + origin[1]).astype(np.float32)
+    st.map_id = np.zeros(1, np.int32)
+    env.maps = [road]
+    return env
 
 
 def test_recorder_classifies_constructed_contacts():
@@ -57,12 +80,16 @@ def test_recorder_classifies_constructed_contacts():
     np.testing.assert_allclose(b.ego_offset, [0.9, 0.2, np.nan, 1.4], rtol=1e-6)
     np.testing.assert_allclose(b.partner_offset, [0.8, 0.1, np.nan, np.nan], rtol=1e-6)
     assert b.overlap.all()
+    # only 4 (heading +x at x = 200) is on the junction lane; 1 and 5 head against every lane
+    assert b.junction.tolist() == [False, False, True, False]
     d = b.to_dict()
     assert d["collisions"] == 4 and sum(d[k]["count"] for k in KINDS) == 4
     assert d["head_on"]["share"] == 0.25 and d["rear_end"]["share_stopped"] == 1.0
     assert np.isnan(d["crossing"]["median_ego_offset"])
     md = b.markdown()
-    assert "| head_on | 1 | 25.0 % | 8.0 | 0.90 / 0.80 | 0 % |" in md
+    assert d["crossing"]["share_junction"] == 1.0 and d["head_on"]["share_junction"] == 0.0
+    assert "| head_on | 1 | 25.0 % | 8.0 | 0.90 / 0.80 | 0 % | 0 % |" in md
+    assert "| crossing | 1 | 25.0 % | 7.0 | - / - | 0 % | 100 % |" in md
 
 
 def test_an_onset_of_an_agent_that_did_not_act_is_ignored():
@@ -82,7 +109,7 @@ def test_bad_settings_and_shapes_are_refused():
     with pytest.raises(ValueError, match=r"unknown kinds \['side'\]"):
         z = np.zeros(1)
         CollisionBreakdown(
-            kind=np.array(["side"]), speed=z, ego_offset=z, partner_offset=z, stopped=z, overlap=z
+            kind=np.array(["side"]), speed=z, ego_offset=z, partner_offset=z, stopped=z, overlap=z, junction=z
         )
     assert CollisionBreakdown().to_dict()["collisions"] == 0
 
