@@ -22,6 +22,7 @@ import sys
 from collections.abc import Sequence
 
 import numpy as np
+from reward_landscape import KeepSpeedDriver  # a sibling script: benchmarks/ is on sys.path
 
 from selfplaydrive.builder import build_env, compose
 
@@ -29,17 +30,12 @@ from selfplaydrive.builder import build_env, compose
 def valid_counts(env, steps: int, seed: int) -> np.ndarray:
     """Valid object rows of every acting agent's observation over `steps` keep-speed steps
     after `env.reset(seed)`; (M,) int64, one entry per (step, acting agent)."""
-    lay = env.layout
-    col = lay.feature_index("object", "valid")
-    middle = np.asarray(env.action_space.nvec, dtype=np.int64) // 2
-    actions = np.broadcast_to(middle, (env.num_agents, len(middle))).copy()
+    col = env.layout.feature_index("object", "valid")
+    actions = KeepSpeedDriver(env).act()
     env.reset(seed=seed)
     counts = []
     for _ in range(steps):
-        obs = env.observations[env.masks]
-        objects = obs[:, lay.objects_offset : lay.road_offset].reshape(
-            len(obs), lay.max_objects, lay.object_dim
-        )
+        objects = env.layout.split(env.observations[env.masks])["objects"]
         counts.append(np.count_nonzero(objects[:, :, col] > 0.5, axis=1))
         env.step(actions)
     return np.concatenate(counts).astype(np.int64)

@@ -30,10 +30,8 @@ def test_counts_match_the_observations_and_respect_the_slots():
     env = build_env(compose("train", small))
     counts = sat.valid_counts(env, steps=3, seed=5)
     env.reset(seed=5)  # step 0 again: the first entries are its acting agents
-    lay = env.layout
-    obs = env.observations[env.masks]
-    objects = obs[:, lay.objects_offset : lay.road_offset].reshape(len(obs), lay.max_objects, lay.object_dim)
-    direct = (objects[:, :, lay.feature_index("object", "valid")] > 0.5).sum(axis=1)
+    objects = env.layout.split(env.observations[env.masks])["objects"]
+    direct = (objects[:, :, env.layout.feature_index("object", "valid")] > 0.5).sum(axis=1)
     np.testing.assert_array_equal(counts[: len(direct)], direct)
     assert counts.max() <= 4 and counts.size >= len(direct) and counts.size <= 3 * env.num_agents
     assert sat.main(["env.num_worlds=1", "--agents", "4", "--slots", "2", "--wide", "8", "--steps", "2"]) == 0
