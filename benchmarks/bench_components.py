@@ -176,6 +176,37 @@ def _variants() -> dict[str, object]:
     return variants
 
 
+def _median_stage_ns(env, stage_name: str, args: argparse.Namespace) -> tuple[float, float]:
+    """(`stage_name` stage ns, whole-step ns) per agent-step of a profiling `env`: medians of
+    per-step times, robust to other processes taking the core now and then."""
+    acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
+    env.reset(0)
+    for k in range(args.warmup):
+        env.step(acts[k])
+    stage, step = [], []
+    for k in range(args.warmup, args.warmup + args.steps):
+        n = int(np.count_nonzero(env.masks))
+        s0, t0 = env.timings[stage_name], time.perf_counter()
+        env.step(acts[k])
+        step.append((time.perf_counter() - t0) / n * 1e9)
+        stage.append((env.timings[stage_name] - s0) / n * 1e9)
+    return float(np.median(stage)), float(np.median(step))
+
+
+def _alternated(variants: dict, time_one, rounds: int, abba: bool = False) -> tuple[dict, dict]:
+    """Per variant the lists of (stage, step) times of `time_one(variant)` over `rounds` rounds,
+    each round timing every variant once (in reversed order every other round when `abba`)."""
+    stage: dict[str, list[float]] = {k: [] for k in variants}
+    step: dict[str, list[float]] = {k: [] for k in variants}
+    for r in range(rounds):
+        order = list(reversed(variants)) if abba and r % 2 else list(variants)
+        for name in order:
+            s, w = time_one(variants[name])
+            stage[name].append(s)
+            step[name].append(w)
+    return stage, step
+
+
 def _time_variant(road_map, term, args: argparse.Namespace) -> tuple[float, float]:
     """(reward-stage ns, whole-step ns) per agent-step with `term` added to the paper's terms."""
     from selfplaydrive.rewards import TERM_NAMES, LinearReward
@@ -189,19 +220,7 @@ def _time_variant(road_map, term, args: argparse.Namespace) -> tuple[float, floa
     env = VecEnv(
         road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, reward=reward, profile=True
     )
-    acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
-    env.reset(0)
-    for k in range(args.warmup):
-        env.step(acts[k])
-    # medians of per-step times: robust to other processes taking the core now and then
-    stage, step = [], []
-    for k in range(args.warmup, args.warmup + args.steps):
-        n = int(np.count_nonzero(env.masks))
-        r0, t0 = env.timings["reward"], time.perf_counter()
-        env.step(acts[k])
-        step.append((time.perf_counter() - t0) / n * 1e9)
-        stage.append((env.timings["reward"] - r0) / n * 1e9)
-    return float(np.median(stage)), float(np.median(step))
+    return _median_stage_ns(env, "reward", args)
 
 
 def terms(args: argparse.Namespace) -> dict[str, object]:
@@ -210,13 +229,7 @@ def terms(args: argparse.Namespace) -> dict[str, object]:
 
     road_map = load_map("default")
     variants = _variants()
-    stage: dict[str, list[float]] = {k: [] for k in variants}
-    step: dict[str, list[float]] = {k: [] for k in variants}
-    for _ in range(args.rounds):
-        for name, term in variants.items():
-            s, w = _time_variant(road_map, term, args)
-            stage[name].append(s)
-            step[name].append(w)
+    stage, step = _alternated(variants, lambda term: _time_variant(road_map, term, args), args.rounds)
     med = {k: (statistics.median(stage[k]), statistics.median(step[k])) for k in variants}
     out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
     base_stage, base_step = med["none"]
@@ -274,18 +287,7 @@ def _time_encoder(road_map, encoder, args: argparse.Namespace) -> tuple[float, f
     env = VecEnv(
         road_map, PaperSpawner(), args.worlds, seed=0, num_threads=args.threads, obs=encoder, profile=True
     )
-    acts = np.random.default_rng(0).integers(0, [7, 13], size=(args.steps + args.warmup, env.num_agents, 2))
-    env.reset(0)
-    for k in range(args.warmup):
-        env.step(acts[k])
-    stage, step = [], []
-    for k in range(args.warmup, args.warmup + args.steps):
-        n = int(np.count_nonzero(env.masks))
-        o0, t0 = env.timings["observation"], time.perf_counter()
-        env.step(acts[k])
-        step.append((time.perf_counter() - t0) / n * 1e9)
-        stage.append((env.timings["observation"] - o0) / n * 1e9)
-    return float(np.median(stage)), float(np.median(step))
+    return _median_stage_ns(env, "observation", args)
 
 
 def encoders(args: argparse.Namespace) -> dict[str, object]:
@@ -294,13 +296,7 @@ def encoders(args: argparse.Namespace) -> dict[str, object]:
 
     road_map = load_map("default")
     variants = _encoder_variants()
-    stage: dict[str, list[float]] = {k: [] for k in variants}
-    step: dict[str, list[float]] = {k: [] for k in variants}
-    for _ in range(args.rounds):
-        for name, enc in variants.items():
-            s, w = _time_encoder(road_map, enc, args)
-            stage[name].append(s)
-            step[name].append(w)
+    stage, step = _alternated(variants, lambda enc: _time_encoder(road_map, enc, args), args.rounds)
     out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
     base = statistics.median(stage["paper"])
     for name in variants:
@@ -331,14 +327,7 @@ def rules(args: argparse.Namespace) -> dict[str, object]:
         "paper_stop_town": (stops, PaperEncoder()),
         "rules_stop_town": (stops, RulesEncoder()),
     }
-    stage: dict[str, list[float]] = {k: [] for k in variants}
-    step: dict[str, list[float]] = {k: [] for k in variants}
-    for r in range(args.rounds):
-        order = list(variants) if r % 2 == 0 else list(reversed(variants))  # ABBA
-        for name in order:
-            s, w = _time_encoder(*variants[name], args)
-            stage[name].append(s)
-            step[name].append(w)
+    stage, step = _alternated(variants, lambda v: _time_encoder(*v, args), args.rounds, abba=True)
     out: dict[str, object] = {"worlds": args.worlds, "threads": args.threads, "steps": args.steps}
     for name in variants:
         base = "paper_stop_town" if name.endswith("stop_town") else "paper"
