@@ -199,7 +199,7 @@ def train_task(cfg: Any) -> dict[str, Any]:
             )
         from selfplaydrive.trainers.run import init_weights
 
-        init_weights(model, str(cfg.init_from))
+        init_weights(model, str(cfg.init_from), widen=bool(cfg.get("init_widen", False)))
     return train_run(env, model, trainer, run_dir, logger=logger, resume=cfg.get("resume"))
 
 

@@ -133,10 +133,28 @@ def test_init_from_starts_a_new_run_from_a_checkpoints_weights(tmp_path):
     assert near < 0.2 * far
 
 
+def test_init_widen_starts_the_papers_sizes_from_the_shipped_laptop_policy(tmp_path):
+    """`model=deepsets init_from=pretrained init_widen=true`: the shipped 32 / 128 / 128 policy
+    copied into 64 / 256 / 256 trains; its first update starts from the shipped function (the
+    widened weights' copies add up to the shipped ones)."""
+    from selfplaydrive import pretrained
+    from selfplaydrive.policies import load_checkpoint
+
+    # a tiny learning rate: Adam moves each weight by at most ~lr per minibatch step
+    extra = ("model=deepsets", "init_from=pretrained", "init_widen=true", "trainer.learning_rate=1e-5")
+    run = train(tmp_path / "wide", 1, *extra)
+    wide, shipped = params(run), load_checkpoint(pretrained.checkpoint_path())["model"]
+    assert wide["actor.weight"].shape == (20, 256) and shipped["actor.weight"].shape == (20, 128)
+    summed = wide["actor.weight"][:, :128] + wide["actor.weight"][:, 128:]
+    assert float((summed - shipped["actor.weight"]).abs().max()) < 1e-3  # one small update away
+
+
 @pytest.mark.parametrize(
     ("extra", "expected"),
     [
         (["init_from=pretrained", "model=deepsets"], "do not fit this run's DeepSetsModel"),
+        (["init_from=pretrained", "model=transformer", "init_widen=true"], "init_widen needs model=deepsets"),
+        (["init_from=pretrained", "model=deepsets_small", "init_widen=true"], "cannot widen input_size"),
         (["init_from=pretrained", "resume=somewhere"], "init_from and resume both set"),
     ],
 )

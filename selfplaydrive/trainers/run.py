@@ -128,7 +128,7 @@ def train_run(
     }
 
 
-def init_weights(model: nn.Module, source: str | Path) -> Path:
+def init_weights(model: nn.Module, source: str | Path, widen: bool = False) -> Path:
     """Load a checkpoint's model weights into `model` to start a new run from them (fine-tuning:
     `selfplaydrive train init_from=...`). Only the weights are taken; the optimiser, the counters,
     the learning-rate schedule and the env start fresh, unlike `resume`.
@@ -137,6 +137,8 @@ def init_weights(model: nn.Module, source: str | Path) -> Path:
         model: The freshly built model of this run's config.
         source: A `.pt` written by `selfplaydrive train` (full or policy-only), or "pretrained"
             for the shipped policy (`selfplaydrive.pretrained`).
+        widen: The checkpoint is a narrower Deep Sets model: copy its units into `model`'s
+            sizes, keeping its function (`models.widen`; `init_widen=true`).
 
     Returns:
         The checkpoint's path.
@@ -150,6 +152,13 @@ def init_weights(model: nn.Module, source: str | Path) -> Path:
 
     path = Path(resolve_spec(str(source)))
     weights = load_checkpoint(path)["model"]
+    if widen:
+        from selfplaydrive.models.widen import widen_deepsets_state
+
+        try:
+            weights = widen_deepsets_state(weights, model)
+        except CheckpointError as exc:
+            raise CheckpointError(str(exc), path) from exc
     try:
         model.load_state_dict(dict(weights))
     except RuntimeError as exc:  # missing keys or size mismatches: another model or layout
