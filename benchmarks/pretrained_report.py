@@ -4,7 +4,7 @@
     python benchmarks/pretrained_report.py                        # map=default and map=tartu
     python benchmarks/pretrained_report.py --maps default --eval quick --episodes 4   # a smoke run
     python benchmarks/pretrained_report.py --checkpoint runs/x/checkpoints/final.pt --out /tmp/x
-        # a candidate before shipping it (the shipped env, with its own observation sizes)
+        # a candidate before shipping it (the shipped env, with its own observation sizes and model)
 
 Per map:
 
@@ -62,7 +62,7 @@ def completion_eval(
         episodes: World-episodes to finish.
         deterministic: Greedy actions instead of sampled ones.
         checkpoint: The policy (the shipped one by default); the env is the shipped run's, with
-            the observation sizes of the checkpoint's own run where its config is found.
+            the observation sizes and model of the checkpoint's own run where its config is found.
         misses: Also break the missed waypoints down by outcome (`eval.misses`) on the same
             world-episodes, in its own rollouts with `policies.make_policy` (same reset seed).
     """
@@ -75,7 +75,7 @@ def completion_eval(
     from selfplaydrive.trainers.ppo.trainer import PPOTrainer
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
 
-    # a candidate trained with other observation sizes sees its own
+    # a candidate trained with other observation sizes or model sizes keeps its own
     cfg = pretrained.evaluation_config(map_name, agents, obs_from=find_run_config(checkpoint))
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
@@ -312,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--checkpoint",
         default=None,
-        help="a candidate: the shipped env with the observation sizes of its own run",
+        help="a candidate: the shipped env with the observation sizes and model of its own run",
     )
     parser.add_argument("--out", default=str(pretrained.FOLDER), help="where report.json and REPORT.md go")
     parser.add_argument("--work", default=None, help="folder for the eval runs (default: a temporary one)")

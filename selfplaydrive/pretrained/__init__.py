@@ -144,8 +144,8 @@ def evaluation_config(
     Args:
         map_name: A `map` option (default, tartu ...) replacing the run's maps; None keeps them.
         agents: Agents per world (None: the run's).
-        obs_from: A run config whose observation sizes replace the shipped run's (a candidate
-            checkpoint's own, `policies.find_run_config`); None keeps them.
+        obs_from: A run config whose observation sizes and model replace the shipped run's (a
+            candidate checkpoint's own, `policies.find_run_config`); None keeps them.
         folder: Where `resolved_config.yaml` lies (the package's folder by default).
     """
     from selfplaydrive.builder import compose
@@ -154,7 +154,8 @@ def evaluation_config(
 
     cfg = load_run_config(Path(folder) / RUN_CONFIG)
     if obs_from is not None:
-        cfg.obs = load_run_config(obs_from).obs
+        own = load_run_config(obs_from)
+        cfg.obs, cfg.model = own.obs, own.model  # e.g. a candidate widened to the paper's sizes
     cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
     if map_name is not None:
         cfg.map = compose("train", [f"map={map_name}"]).map
