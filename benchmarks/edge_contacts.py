@@ -30,7 +30,7 @@ def run(
 
     builtin = is_builtin(resolve_spec(policy))
     own = None if builtin or policy == pretrained.NAME else find_run_config(policy)
-    cfg = pretrained.evaluation_config(map_name, agents, obs_from=own)  # a candidate: its own obs and model
+    cfg = pretrained.evaluation_config(map_name, agents, sizes_from=own)  # a candidate: its own obs and model
     env = build_env(cfg)
     driver = make_policy(policy, env, **({} if builtin else {"deterministic": greedy}))
     start = time.perf_counter()

@@ -76,7 +76,7 @@ def completion_eval(
     from selfplaydrive.trainers.run import EVAL_SEED_OFFSET, seed_everything
 
     # a candidate trained with other observation sizes or model sizes keeps its own
-    cfg = pretrained.evaluation_config(map_name, agents, obs_from=find_run_config(checkpoint))
+    cfg = pretrained.evaluation_config(map_name, agents, sizes_from=find_run_config(checkpoint))
     seed_everything(int(cfg.seed), 1)
     env = build_env(cfg)
     model = build_model(cfg, env)

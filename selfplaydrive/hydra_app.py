@@ -191,6 +191,8 @@ def train_task(cfg: Any) -> dict[str, Any]:
         return trainer.run(env, cfg, run_dir, logger=logger)
     seed_everything(int(cfg.seed), trainer.torch_threads)  # before the model: its initial weights
     model = build_model(cfg, env)
+    if cfg.get("init_widen") and cfg.get("init_from") is None:
+        raise ConfigError("init_widen=true needs init_from=<narrower checkpoint .pt or pretrained>; got none")
     if cfg.get("init_from") is not None:
         if cfg.get("resume") is not None:
             raise ConfigError(

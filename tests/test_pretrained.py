@@ -192,7 +192,7 @@ def test_evaluation_config_sets_up_the_papers_protocol(tmp_path):
     other["obs"]["max_road"] = 17
     other["model"]["lstm_size"] = 256  # a candidate of other sizes (init_widen) brings its model
     (tmp_path / "resolved_config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(other)))
-    candidate = pretrained.evaluation_config(obs_from=tmp_path / "resolved_config.yaml")
+    candidate = pretrained.evaluation_config(sizes_from=tmp_path / "resolved_config.yaml")
     assert candidate.obs.max_road == 17 and candidate.model.lstm_size == 256
     assert candidate.spawner.num_agents == run.spawner.num_agents and run.model.lstm_size == 128
 

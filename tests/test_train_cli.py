@@ -156,6 +156,7 @@ def test_init_widen_starts_the_papers_sizes_from_the_shipped_laptop_policy(tmp_p
         (["init_from=pretrained", "model=transformer", "init_widen=true"], "init_widen needs model=deepsets"),
         (["init_from=pretrained", "model=deepsets_small", "init_widen=true"], "cannot widen input_size"),
         (["init_from=pretrained", "resume=somewhere"], "init_from and resume both set"),
+        (["init_widen=true"], "init_widen=true needs init_from"),
     ],
 )
 def test_init_from_refuses_foreign_weights_and_resume_in_one_line(tmp_path, capsys, extra, expected):

@@ -134,7 +134,7 @@ def build_env(
 def evaluation_config(
     map_name: str | None = None,
     agents: int | None = None,
-    obs_from: str | os.PathLike[str] | None = None,
+    sizes_from: str | os.PathLike[str] | None = None,
     folder: Path = FOLDER,
 ) -> Any:
     """The shipped run's config (`resolved_config.yaml`) set up for the paper's evaluation
@@ -144,7 +144,7 @@ def evaluation_config(
     Args:
         map_name: A `map` option (default, tartu ...) replacing the run's maps; None keeps them.
         agents: Agents per world (None: the run's).
-        obs_from: A run config whose observation sizes and model replace the shipped run's (a
+        sizes_from: A run config whose observation sizes and model replace the shipped run's (a
             candidate checkpoint's own, `policies.find_run_config`); None keeps them.
         folder: Where `resolved_config.yaml` lies (the package's folder by default).
     """
@@ -153,8 +153,8 @@ def evaluation_config(
     from selfplaydrive.scenario.spawner import without_curricula
 
     cfg = load_run_config(Path(folder) / RUN_CONFIG)
-    if obs_from is not None:
-        own = load_run_config(obs_from)
+    if sizes_from is not None:
+        own = load_run_config(sizes_from)
         cfg.obs, cfg.model = own.obs, own.model  # e.g. a candidate widened to the paper's sizes
     cfg.reward.mode = "eval"  # conf/reward/eval.yaml: the paper's fixed evaluation coefficients
     if map_name is not None:
