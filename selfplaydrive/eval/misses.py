@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from selfplaydrive.eval.sampling import FirstEpisodes
 from selfplaydrive.sim.vec_env import EVER_BITS
 
 OUTCOMES = ("all_reached", "vehicle_collision", "pedestrian", "road_edge", "off_route", "pending_ahead")
@@ -143,7 +144,8 @@ def completion_breakdown(
     recorders: Sequence[Any] = (),
 ) -> MissBreakdown:
     """Drive `env` with `policy(observations, env)` (e.g. `policies.make_policy`) from a reset
-    until `world_episodes` world-episodes have ended (or `max_steps` env steps) and break their
+    until every world has finished its share of `world_episodes` world-episodes (its first ones,
+    `eval.sampling`; or `max_steps` env steps) and break their
     missed waypoints down by outcome.
 
     Args:
@@ -159,7 +161,7 @@ def completion_breakdown(
         raise ValueError(f"world_episodes: expected >= 1, got {world_episodes!r}")
     before = env.record_agents
     env.record_agents = True
-    records: list[Mapping[str, Any]] = []
+    first = FirstEpisodes(int(world_episodes), env.num_worlds)  # each world's first ones
     try:
         env.reset(seed=seed)
         if hasattr(policy, "reset"):
@@ -168,9 +170,9 @@ def completion_breakdown(
             env.step(policy(env.observations, env))
             for rec in recorders:
                 rec.record()
-            records += env.pop_episode_stats()
-            if len(records) >= world_episodes:
+            first.add(env.pop_episode_stats())
+            if first.done:
                 break
     finally:
         env.record_agents = before
-    return breakdown_of(records[: int(world_episodes)])
+    return breakdown_of(first.kept)

@@ -32,6 +32,7 @@ from gymnasium import spaces
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
+from selfplaydrive.eval.sampling import first_episodes_quota
 from selfplaydrive.models.common import ObsSplitter, compact_sets, masked_max, mlp
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
@@ -335,7 +336,8 @@ class SB3Trainer:
 
 
 def evaluate(model, venv, episodes: int, max_steps: int, deterministic: bool, seed: int) -> dict[str, float]:
-    """Run `model` on fresh worlds until `episodes` world-episodes ended or `max_steps` env steps.
+    """Run `model` on fresh worlds until every world finished its share of `episodes`
+    world-episodes (its first ones, `eval.sampling`) or `max_steps` env steps.
 
     Returns:
         `trainers.ppo.episodes.summarize` of the finished episodes: waypoint_completion,
@@ -344,6 +346,7 @@ def evaluate(model, venv, episodes: int, max_steps: int, deterministic: bool, se
     """
     native = venv.env
     tracker = EpisodeTracker(native)
+    tracker.count_first(first_episodes_quota(episodes, native.num_worlds))
     venv.seed(seed)
     obs = venv.reset()
     tracker.on_reset()
@@ -356,7 +359,7 @@ def evaluate(model, venv, episodes: int, max_steps: int, deterministic: bool, se
         new_records, new_returns = tracker.pop()
         records += new_records
         returns += new_returns
-        if len(records) >= episodes:
+        if tracker.quota_met:
             break
     return summarize(records, returns)
 

@@ -32,10 +32,28 @@ class EpisodeTracker:
         self.assigned = np.zeros(self.num_worlds, dtype=np.int64)
         self.records: list[dict[str, object]] = []
         self.returns: list[float] = []
+        self.episode_index = np.zeros(self.num_worlds, dtype=np.int64)
+        self.quota: np.ndarray | None = None
+
+    def count_first(self, quota: np.ndarray | None) -> None:
+        """Keep only the first `quota[w]` episodes of every world w after the next reset, and
+        only the returns of their agents (an evaluation's unbiased sample of episode lengths,
+        `eval.sampling`); None keeps every episode (training).
+
+        Args:
+            quota: (num_worlds,) int episodes per world (`eval.sampling.first_episodes_quota`).
+        """
+        self.quota = None if quota is None else np.asarray(quota, dtype=np.int64).reshape(self.num_worlds)
+
+    @property
+    def quota_met(self) -> bool:
+        """With a quota: every world has finished its quota of episodes since the reset."""
+        return self.quota is not None and bool((self.episode_index >= self.quota).all())
 
     def on_reset(self) -> None:
         """Call after `env.reset`: forget partial returns, read the new waypoint counts."""
         self.slot_return[:] = 0.0
+        self.episode_index[:] = 0
         self.env.pop_episode_stats()
         self._read_assigned(np.arange(self.num_worlds))
 
@@ -49,14 +67,22 @@ class EpisodeTracker:
         self.slot_return += np.where(acted, env.rewards, 0.0)
         ended = acted & (env.terminations | env.truncations)
         if ended.any():
-            self.returns.extend(self.slot_return[ended].tolist())
+            slots = np.flatnonzero(ended)
+            if self.quota is not None:  # the episode an agent ends in has not been counted yet
+                w = slots // self.agents_per_world
+                slots = slots[self.episode_index[w] < self.quota[w]]
+            self.returns.extend(self.slot_return[slots].tolist())
             self.slot_return[ended] = 0.0
         stats = env.pop_episode_stats()
         if stats:
             worlds = np.array([int(rec["world"]) for rec in stats])
             for rec in stats:
-                rec["waypoints_assigned"] = int(self.assigned[int(rec["world"])])
-                self.records.append(rec)
+                w = int(rec["world"])
+                rec["waypoints_assigned"] = int(self.assigned[w])
+                rec["episode_index"] = int(self.episode_index[w])
+                if self.quota is None or self.episode_index[w] < self.quota[w]:
+                    self.records.append(rec)
+                self.episode_index[w] += 1
             # the ended worlds were resampled inside step: their rows now hold the new episode
             self._read_assigned(worlds)
 
@@ -78,6 +104,7 @@ class EpisodeTracker:
             "assigned": self.assigned.copy(),
             "records": list(self.records),
             "returns": list(self.returns),
+            "episode_index": self.episode_index.copy(),
         }
 
     def load_state_dict(self, state: dict[str, object]) -> None:
@@ -85,6 +112,8 @@ class EpisodeTracker:
         self.assigned[:] = state["assigned"]
         self.records = list(state["records"])
         self.returns = list(state["returns"])
+        if "episode_index" in state:  # checkpoints before session 26 lack it
+            self.episode_index[:] = state["episode_index"]
 
 
 def summarize(records: list[dict[str, object]], returns: list[float]) -> dict[str, float]:

@@ -23,6 +23,7 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
+from selfplaydrive.eval.sampling import first_episodes_quota
 from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
@@ -608,28 +609,33 @@ class PPOTrainer:
     def evaluate(
         self, episodes: int, max_steps: int, deterministic: bool, seed: int, recorders: Sequence[Any] = ()
     ) -> dict[str, float]:
-        """Run the policy on fresh episodes (env reset with `seed`) until `episodes` world
-        episodes ended or `max_steps` env steps; returns `episodes.summarize` of them. Training
-        afterwards starts from a fresh reset. Each of `recorders` has its `record()` called after
-        every env step (e.g. `eval.collisions.CollisionRecorder`).
+        """Run the policy on fresh episodes (env reset with `seed`) until every world finished
+        its share of `episodes` world-episodes (its first ones: `eval.sampling`, an unbiased
+        sample of episode lengths) or `max_steps` env steps; returns `episodes.summarize` of
+        them. Training afterwards starts from a fresh reset. Each of `recorders` has its
+        `record()` called after every env step (e.g. `eval.collisions.CollisionRecorder`).
 
         Sampled actions come from `sample_gen`; with a rollout in hand (overlap_collection),
         from a copy of its state before that rollout, which later evaluations continue: an
         evaluation then draws what it would have drawn had the rollout not been collected yet."""
-        self.reset_env(seed)
-        generator = self._evaluation_generator()
-        records: list[dict[str, object]] = []
-        returns: list[float] = []
-        for _ in range(max_steps):
-            _, actions, _, _, acted = self.act(deterministic, net=self.model, generator=generator)
-            self.env_step(actions, acted, net=self.model)
-            for rec in recorders:
-                rec.record()
-            r, g = self.tracker.pop()
-            records += r
-            returns += g
-            if len(records) >= episodes:
-                break
+        self.tracker.count_first(first_episodes_quota(episodes, self.env.num_worlds))
+        try:
+            self.reset_env(seed)
+            generator = self._evaluation_generator()
+            records: list[dict[str, object]] = []
+            returns: list[float] = []
+            for _ in range(max_steps):
+                _, actions, _, _, acted = self.act(deterministic, net=self.model, generator=generator)
+                self.env_step(actions, acted, net=self.model)
+                for rec in recorders:
+                    rec.record()
+                r, g = self.tracker.pop()
+                records += r
+                returns += g
+                if self.tracker.quota_met:
+                    break
+        finally:
+            self.tracker.count_first(None)
         self.needs_reset = True
         return summarize(records, returns)
 
