@@ -32,7 +32,6 @@ from gymnasium import spaces
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.eval.sampling import first_episodes_quota
 from selfplaydrive.models.common import ObsSplitter, compact_sets, masked_max, mlp
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
@@ -346,7 +345,7 @@ def evaluate(model, venv, episodes: int, max_steps: int, deterministic: bool, se
     """
     native = venv.env
     tracker = EpisodeTracker(native)
-    tracker.count_first(first_episodes_quota(episodes, native.num_worlds))
+    tracker.count_first(episodes)
     venv.seed(seed)
     obs = venv.reset()
     tracker.on_reset()

@@ -35,13 +35,13 @@ def test_first_episodes_of_each_world_not_the_first_to_finish():
     assert np.mean([r["length_s"] for r in records[:4]]) == 25.0
 
 
-def _rollout(quota, steps: int | None):
+def _rollout(episodes, steps: int | None):
     """Random actions in 4 worlds of 6 agents with 0.5 s and 4 s episodes; returns the tracker's
     records, returns and the steps taken (until the quota is met, or `steps`)."""
     spawner = PaperSpawner(num_agents=6, episode_lengths=(0.5, 4.0))
     env = make_env("default", spawner=spawner, num_worlds=4, seed=5)
     tracker = EpisodeTracker(env)
-    tracker.count_first(quota)
+    tracker.count_first(episodes)
     env.reset(seed=5)
     tracker.on_reset()
     rng = np.random.default_rng(0)
@@ -59,8 +59,7 @@ def _rollout(quota, steps: int | None):
 
 
 def test_tracker_keeps_the_first_episodes_and_only_their_agents_returns():
-    quota = first_episodes_quota(6, 4)  # [2, 2, 1, 1]
-    records, returns, steps = _rollout(quota, None)
+    records, returns, steps = _rollout(6, None)  # quota [2, 2, 1, 1]
     per_world = {w: [r["episode_index"] for r in records if r["world"] == w] for w in range(4)}
     assert per_world == {0: [0, 1], 1: [0, 1], 2: [0], 3: [0]}
     # every agent of a counted episode ends once in it (a contact or the world's end), and no

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from selfplaydrive.eval.sampling import first_episodes_quota
+
 RATE_EVENTS = {"collision": "collision", "offroad": "offroad", "red_light": "red_light"}
 PER_KM_EVENTS = ("collision", "offroad", "red_light", "waypoint")
 
@@ -35,15 +37,11 @@ class EpisodeTracker:
         self.episode_index = np.zeros(self.num_worlds, dtype=np.int64)
         self.quota: np.ndarray | None = None
 
-    def count_first(self, quota: np.ndarray | None) -> None:
-        """Keep only the first `quota[w]` episodes of every world w after the next reset, and
-        only the returns of their agents (an evaluation's unbiased sample of episode lengths,
-        `eval.sampling`); None keeps every episode (training).
-
-        Args:
-            quota: (num_worlds,) int episodes per world (`eval.sampling.first_episodes_quota`).
-        """
-        self.quota = None if quota is None else np.asarray(quota, dtype=np.int64).reshape(self.num_worlds)
+    def count_first(self, episodes: int | None) -> None:
+        """Keep only each world's first episodes after the next reset, `episodes` in all
+        (`eval.sampling.first_episodes_quota`), and only the returns of their agents: an
+        evaluation's unbiased sample of episode lengths. None keeps every episode (training)."""
+        self.quota = None if episodes is None else first_episodes_quota(episodes, self.num_worlds)
 
     @property
     def quota_met(self) -> bool:

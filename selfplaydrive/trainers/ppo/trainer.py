@@ -23,7 +23,6 @@ import numpy as np
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import CheckpointError
-from selfplaydrive.eval.sampling import first_episodes_quota
 from selfplaydrive.models.common import log_prob, log_prob_and_entropy, sample_actions
 from selfplaydrive.trainers.callbacks import build_callbacks, callback_name
 from selfplaydrive.trainers.ppo import checkpoint as ckpt
@@ -618,7 +617,7 @@ class PPOTrainer:
         Sampled actions come from `sample_gen`; with a rollout in hand (overlap_collection),
         from a copy of its state before that rollout, which later evaluations continue: an
         evaluation then draws what it would have drawn had the rollout not been collected yet."""
-        self.tracker.count_first(first_episodes_quota(episodes, self.env.num_worlds))
+        self.tracker.count_first(episodes)
         try:
             self.reset_env(seed)
             generator = self._evaluation_generator()
