@@ -85,6 +85,21 @@ def check_positive(name: str, value: int) -> int:
     return int(value)
 
 
+def orthogonal_(weight: Tensor, gain: float) -> Tensor:
+    """`nn.init.orthogonal_` on one intra-op thread, restoring the caller's thread count.
+
+    The QR decomposition behind it rounds differently with the number of threads (up to 2e-7
+    here), and PPO amplifies that: the same seed gave a different model, and a different
+    learning curve, depending on whether the process had called `torch.set_num_threads(1)`
+    before building it. One thread makes the initial weights a function of the seed alone."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return nn.init.orthogonal_(weight, gain)
+    finally:
+        torch.set_num_threads(threads)
+
+
 def mlp(
     sizes: Sequence[int], activation: type[nn.Module] = nn.ReLU, final_act: bool = False
 ) -> nn.Sequential:

@@ -24,6 +24,7 @@ from selfplaydrive.models.common import (
     compact_sets,
     encode_max,
     middle_prior_bias,
+    orthogonal_,
     reset_state,
 )
 from selfplaydrive.obs.layout import ObsLayout
@@ -77,7 +78,7 @@ def _lstm_sequence(lstm: nn.LSTM, x: Tensor, h: Tensor, c: Tensor) -> tuple[Tens
 def _orthogonal(module: nn.Module, gain: float) -> None:
     for name, p in module.named_parameters():
         if p.dim() >= 2:
-            nn.init.orthogonal_(p, gain)
+            orthogonal_(p, gain)
         elif "bias" in name and not isinstance(module, nn.LayerNorm):
             nn.init.zeros_(p)
 

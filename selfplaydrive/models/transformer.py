@@ -22,6 +22,7 @@ from selfplaydrive.models.common import (
     compact_sets,
     middle_prior_bias,
     mlp,
+    orthogonal_,
 )
 from selfplaydrive.obs.layout import ObsLayout
 
@@ -158,7 +159,7 @@ class TransformerModel(nn.Module):
         # gradually rather than scrambling tokens at initialisation.
         nn.init.zeros_(self.film[-1].weight)
         nn.init.zeros_(self.film[-1].bias)
-        nn.init.orthogonal_(self.actor.weight, 0.01)
+        orthogonal_(self.actor.weight, 0.01)
         nn.init.zeros_(self.actor.bias)
 
     def initial_state(self, batch_size: int, device: torch.device | str | None = None) -> State:

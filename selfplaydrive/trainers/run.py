@@ -178,10 +178,9 @@ def seed_everything(seed: int, torch_threads: int = 0) -> None:
 
     Args:
         seed: The run's seed.
-        torch_threads: When > 0, torch's CPU thread count is set first (`PPOConfig.torch_threads`):
-            the orthogonal initialisation (a QR decomposition) gives other bits on another thread
-            count, so the same seed would otherwise give another model after an earlier run in the
-            same process (a Hydra sweep) changed the count.
+        torch_threads: When > 0, torch's CPU thread count is set first (`PPOConfig.torch_threads`).
+            The initial weights do not depend on it (`models.common.orthogonal_` runs the QR
+            decomposition on one thread), the training's float rounding does.
     """
     if torch_threads:
         torch.set_num_threads(int(torch_threads))
