@@ -133,17 +133,21 @@ def test_render_cli_drives_the_pretrained_policy(tmp_path):
 
 def test_eval_completion_uses_the_training_spawner_with_evaluation_coefficients(tmp_path):
     """`selfplaydrive eval policy=pretrained` measures waypoint completion in the env the policy
-    was trained in (16 agents per world) under the paper's fixed evaluation coefficients."""
+    was trained in (its config's agents per world) under the paper's fixed evaluation coefficients."""
     import json
 
+    from omegaconf import OmegaConf
+
     from selfplaydrive.cli import main
+
+    trained = int(OmegaConf.load(pretrained.FOLDER / pretrained.RUN_CONFIG).spawner.num_agents)
 
     out = tmp_path / "run"
     args = ["eval", "policy=pretrained", "eval=quick", "eval.analyses=[completion]", f"hydra.run.dir={out}"]
     assert main([*args, "eval.completion.world_episodes=1", "eval.completion.num_worlds=1"]) == 0
     done = json.loads((out / "completion.json").read_text())
     assert done["protocol"]["spawner"] == "the training run's spawner"
-    assert done["episodes"] == 1 and 0 < done["agents"] <= 16
+    assert done["episodes"] == 1 and 0 < done["agents"] <= trained
     assert 0.0 <= done["waypoint_completion"] <= 1.0
 
 

@@ -10,6 +10,7 @@ Column order is `COEFF_NAMES` / `HIDDEN_PARAMS` from `selfplaydrive.scenario.typ
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -21,6 +22,25 @@ from selfplaydrive.scenario.types import COEFF_NAMES, HIDDEN_PARAMS
 # so that sweeps can override one end: `reward.collision.high=0.5,1.0`.
 Range = tuple[float, float] | Mapping[str, float]
 _MODES = ("train", "eval")
+# The paper's coefficient distributions and evaluation values (section 2.3, section 5): the
+# defaults of `ConditioningSampler` and of `RewardSettings` (one source; conf/reward/paper.yaml
+# writes them out for the command line, and tests compare the two)
+PAPER: dict[str, Any] = {
+    "waypoint_radius": (1.0, 3.0),  # D [m]
+    "collision": (0.0, 1.0),
+    "offroad": (0.0, 1.0),
+    "red_light": (0.0, 1.0),
+    "comfort": (0.0, 0.01),
+    "center_low": (2.5e-5, 2.5e-4),  # C_center is bimodal: two log-spaced ranges
+    "center_high": (2.5e-4, 2.5e-3),
+    "center_low_prob": 0.5,
+    "center_bias": (-0.3, 0.3),  # B [m], positive = right of the lane centre
+    "align_low": (2.5e-5, 2.5e-3),
+    "align_high": (2.5e-3, 2.5e-2),
+    "align_low_prob": 0.5,
+    "eval_waypoint_radius": 3.0,  # D [m] in evaluation mode
+    "eval_center_bias": 0.0,
+}
 
 
 def _check_range(name: str, value: Range, allow_equal: bool = True) -> tuple[float, float]:
@@ -71,20 +91,20 @@ class ConditioningSampler:
     def __init__(
         self,
         mode: str = "train",
-        waypoint_radius: Range = (1.0, 3.0),
-        collision: Range = (0.0, 1.0),
-        offroad: Range = (0.0, 1.0),
-        red_light: Range = (0.0, 1.0),
-        comfort: Range = (0.0, 0.01),
-        center_low: Range = (2.5e-5, 2.5e-4),
-        center_high: Range = (2.5e-4, 2.5e-3),
-        center_low_prob: float = 0.5,
-        center_bias: Range = (-0.3, 0.3),
-        align_low: Range = (2.5e-5, 2.5e-3),
-        align_high: Range = (2.5e-3, 2.5e-2),
-        align_low_prob: float = 0.5,
-        eval_waypoint_radius: float = 3.0,
-        eval_center_bias: float = 0.0,
+        waypoint_radius: Range = PAPER["waypoint_radius"],
+        collision: Range = PAPER["collision"],
+        offroad: Range = PAPER["offroad"],
+        red_light: Range = PAPER["red_light"],
+        comfort: Range = PAPER["comfort"],
+        center_low: Range = PAPER["center_low"],
+        center_high: Range = PAPER["center_high"],
+        center_low_prob: float = PAPER["center_low_prob"],
+        center_bias: Range = PAPER["center_bias"],
+        align_low: Range = PAPER["align_low"],
+        align_high: Range = PAPER["align_high"],
+        align_low_prob: float = PAPER["align_low_prob"],
+        eval_waypoint_radius: float = PAPER["eval_waypoint_radius"],
+        eval_center_bias: float = PAPER["eval_center_bias"],
     ) -> None:
         if mode not in _MODES:
             raise ConfigError(f"ConditioningSampler mode must be one of {_MODES}, got {mode!r}")

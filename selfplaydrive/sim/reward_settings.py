@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.scenario.conditioning import ConditioningSampler, Range
+from selfplaydrive.scenario.conditioning import PAPER, ConditioningSampler, Range
 from selfplaydrive.sim.params import SimParams
 
 # the reward constants (section 2.3): `SimParams` fields of the same names carry them to the
@@ -61,20 +61,20 @@ class RewardSettings:
     def __init__(
         self,
         mode: str = "train",
-        waypoint_radius: Range = (1.0, 3.0),
-        collision: Range = (0.0, 1.0),
-        offroad: Range = (0.0, 1.0),
-        red_light: Range = (0.0, 1.0),
-        comfort: Range = (0.0, 0.01),
-        center_low: Range = (2.5e-5, 2.5e-4),
-        center_high: Range = (2.5e-4, 2.5e-3),
-        center_low_prob: float = 0.5,
-        center_bias: Range = (-0.3, 0.3),
-        align_low: Range = (2.5e-5, 2.5e-3),
-        align_high: Range = (2.5e-3, 2.5e-2),
-        align_low_prob: float = 0.5,
-        eval_waypoint_radius: float = 3.0,
-        eval_center_bias: float = 0.0,
+        waypoint_radius: Range = PAPER["waypoint_radius"],
+        collision: Range = PAPER["collision"],
+        offroad: Range = PAPER["offroad"],
+        red_light: Range = PAPER["red_light"],
+        comfort: Range = PAPER["comfort"],
+        center_low: Range = PAPER["center_low"],
+        center_high: Range = PAPER["center_high"],
+        center_low_prob: float = PAPER["center_low_prob"],
+        center_bias: Range = PAPER["center_bias"],
+        align_low: Range = PAPER["align_low"],
+        align_high: Range = PAPER["align_high"],
+        align_low_prob: float = PAPER["align_low_prob"],
+        eval_waypoint_radius: float = PAPER["eval_waypoint_radius"],
+        eval_center_bias: float = PAPER["eval_center_bias"],
         terms: Mapping[str, Any] | None = None,
         waypoint_reward: float = CONSTANTS["waypoint_reward"],
         velocity_reward: float = CONSTANTS["velocity_reward"],

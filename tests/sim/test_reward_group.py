@@ -16,7 +16,7 @@ from selfplaydrive.builder import build_env, build_spawner, compose, make_env
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.physics import BicycleModel
 from selfplaydrive.rewards import TERM_NAMES
-from selfplaydrive.scenario.conditioning import ConditioningSampler
+from selfplaydrive.scenario.conditioning import PAPER, ConditioningSampler
 from selfplaydrive.scenario.types import COEFF_NAMES
 from selfplaydrive.sim.params import COEFF_SCALE
 from selfplaydrive.sim.reward_settings import CONSTANTS, RewardSettings
@@ -45,6 +45,20 @@ def build_env_settings(overrides):
     from selfplaydrive.builder import build_reward
 
     return build_reward(compose("train", overrides))
+
+
+def test_paper_yaml_writes_out_the_one_table_of_ranges():
+    """conf/reward/paper.yaml, ConditioningSampler and RewardSettings give the same distributions:
+    the constructors default to `PAPER`, and the YAML writes every entry of it out."""
+    node = compose("train", ["reward=paper"]).reward
+    for key, value in PAPER.items():
+        written = node[key]
+        got = (written.low, written.high) if isinstance(value, tuple) else written
+        assert got == value, key
+    sampler, settings = ConditioningSampler(), RewardSettings().conditioning
+    for key, value in PAPER.items():
+        assert getattr(sampler, key) == value == getattr(settings, key), key
+    assert PAPER["center_low"] == (2.5e-5, 2.5e-4) and PAPER["waypoint_radius"] == (1.0, 3.0)
 
 
 def test_scale_hand_computed_from_the_ranges():
