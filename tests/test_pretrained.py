@@ -136,12 +136,10 @@ def test_eval_completion_uses_the_training_spawner_with_evaluation_coefficients(
     was trained in (its config's agents per world) under the paper's fixed evaluation coefficients."""
     import json
 
-    from omegaconf import OmegaConf
-
     from selfplaydrive.cli import main
+    from selfplaydrive.policies import load_run_config
 
-    trained = int(OmegaConf.load(pretrained.FOLDER / pretrained.RUN_CONFIG).spawner.num_agents)
-
+    trained = int(load_run_config(pretrained.FOLDER / pretrained.RUN_CONFIG).spawner.num_agents)
     out = tmp_path / "run"
     args = ["eval", "policy=pretrained", "eval=quick", "eval.analyses=[completion]", f"hydra.run.dir={out}"]
     assert main([*args, "eval.completion.world_episodes=1", "eval.completion.num_worlds=1"]) == 0
