@@ -282,3 +282,45 @@ def test_report_judges_completion_on_the_mean_over_sets_of_worlds():
     assert "not met: 79.0 %" in report.target_lines({"maps": {"default": rep}})[0]
     del rep["completion_sets"]  # a report written before the sets: the best row, as before
     assert "completion (best row; worst 95.0 %): 95.0 %" in report.target_lines({"maps": {"default": rep}})[0]
+
+
+def _select_script():
+    return load_file(ROOT / "benchmarks" / "select_candidates.py", "select_candidates")
+
+
+def test_candidate_selection_refuses_the_held_out_sets_and_pairs_by_set():
+    """The report's held-out seeds cannot be used to pick a policy; hand-computed paired
+    differences: (+2, +4, +6) points over three sets -> +4 +- t(0.975, 2) * 2 / sqrt(3) = +4 +- 4.97."""
+    select = _select_script()
+    assert not set(select.VALIDATION_SEEDS) & set(select.pretrained_report.SET_SEEDS)
+    with pytest.raises(ValueError, match=r"\[1003\] are the report's held-out sets"):
+        select.check_seeds([29, 1003])
+    with pytest.raises(ValueError, match="repeats a seed"):
+        select.check_seeds([29, 29])
+    with pytest.raises(FileNotFoundError, match="nope.pt"):
+        select.resolve("nope.pt")
+    diffs = select.paired({"base": [0.70, 0.80, 0.90], "new": [0.72, 0.84, 0.96]}, "base")
+    assert list(diffs) == ["new"]
+    assert diffs["new"]["mean"] == pytest.approx(0.04)
+    assert diffs["new"]["lo"] == pytest.approx(0.04 - 0.04968, abs=1e-4)
+    assert diffs["new"]["hi"] == pytest.approx(0.04 + 0.04968, abs=1e-4)
+
+
+def test_candidate_selection_on_real_worlds_compares_like_with_like(tmp_path):
+    """The same weights under two names drive the same worlds: every paired difference is
+    exactly zero; two seeds give two sets of worlds."""
+    import shutil
+
+    select = _select_script()
+    copy = tmp_path / "copy.pt"
+    shutil.copy(pretrained.checkpoint_path(), copy)
+    with pytest.raises(ValueError, match="named twice"):
+        select.evaluate(["pretrained", "pretrained"], [29], 1, [], agents=4)
+    result = select.evaluate(["pretrained", str(copy)], [29, 30], 1, [], agents=4)
+    rows = result["candidates"]
+    assert rows["pretrained"]["completion"] == rows[str(copy)]["completion"]
+    assert len(rows["pretrained"]["completion"]) == 2
+    assert result["paired"][str(copy)]["mean"] == 0.0
+    lines = select.markdown(result)
+    assert lines[0].startswith("| candidate | 29 | 30 | mean |") and "| baseline |" in lines[2]
+    assert "| +0.0 (+0.0 to +0.0) |" in lines[3]
