@@ -70,7 +70,7 @@ def ship(checkpoint: str | Path, info: dict[str, Any], out: Path = FOLDER) -> di
         raise CheckpointError(
             "no resolved_config.yaml in its run folder; expected a training run's checkpoint"
         )
-    payload = ckpt.load(checkpoint)
+    payload = ckpt.load(checkpoint, required=ckpt.POLICY_KEYS)  # a training checkpoint or a soup
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(cfg_file, out / RUN_CONFIG)
     torch.save(policy_payload(payload, load_run_config(cfg_file)), out / CHECKPOINT)
