@@ -226,9 +226,7 @@ def markdown(report: dict[str, Any]) -> str:
         "# The pretrained policy: evaluation report",
         "",
         f"Written by `{report['command']}` on {report['date']} ({report['machine']}).",
-        f"Policy: `selfplaydrive/pretrained/main_job.pt`, update {meta.get('update')}, "
-        f"{meta.get('slot_steps')} slot-steps ({meta.get('agent_steps')} agent-steps) of "
-        f"`{meta.get('command', '?')}`.",
+        policy_line(meta),
         "",
         *training_lines(meta),
     ]
@@ -344,13 +342,38 @@ def set_lines(sets: dict[str, Any] | None) -> list[str]:
     ]
 
 
+def policy_line(meta: dict[str, Any]) -> str:
+    """Which policy the report is about: a run's checkpoint, or the mean of several runs'
+    weights (`trainers.soup`, its runs in `main_job.json`'s `ingredients`)."""
+    head = "Policy: `selfplaydrive/pretrained/main_job.pt`, "
+    if meta.get("ingredients"):
+        return head + (
+            f"the mean of the weights of {len(meta['ingredients'])} checkpoints "
+            f"(`{meta.get('command', '?')}`; the runs under Training)."
+        )
+    return head + (
+        f"update {meta.get('update')}, {meta.get('slot_steps')} slot-steps ({meta.get('agent_steps')} "
+        f"agent-steps) of `{meta.get('command', '?')}`."
+    )
+
+
 def training_lines(meta: dict[str, Any]) -> list[str]:
-    """How the shipped policy was trained, from `main_job.json`."""
+    """How the shipped policy was trained, from `main_job.json`: a table of facts, and for a
+    soup one row per ingredient (run, seed, slot-steps, command)."""
     keys = ("command", "invocation", "seed", "start_utc", "end_utc", "duration_s", "machine", "git_commit")
-    rows = [f"| {k} | `{meta[k]}` |" for k in keys if k in meta]
+    rows = [f"| {k} | `{meta[k]}` |" for k in keys if meta.get(k) is not None]
     counts = ("update", "slot_steps", "agent_steps", "size_bytes")
-    rows += [f"| {k} | {meta[k]} |" for k in counts if k in meta]
-    return ["## Training", "", "| | |", "|---|---|", *rows, ""]
+    rows += [f"| {k} | {meta[k]} |" for k in counts if meta.get(k) is not None]
+    lines = ["## Training", "", "| | |", "|---|---|", *rows, ""]
+    parts = meta.get("ingredients") or []
+    if parts:
+        lines += ["| ingredient | seed | slot-steps | command |", "|---|---|---|---|"]
+        lines += [
+            f"| {p.get('run')} | {p.get('seed', '')} | {p.get('slot_steps', '')} | `{p.get('command', '')}` |"
+            for p in parts
+        ]
+        lines.append("")
+    return lines
 
 
 def target_lines(report: dict[str, Any]) -> list[str]:

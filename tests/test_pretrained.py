@@ -324,3 +324,20 @@ def test_candidate_selection_on_real_worlds_compares_like_with_like(tmp_path):
     lines = select.markdown(result)
     assert lines[0].startswith("| candidate | 29 | 30 | mean |") and "| baseline |" in lines[2]
     assert "| +0.0 (+0.0 to +0.0) |" in lines[3]
+
+
+def test_report_names_a_soup_and_its_runs():
+    """A shipped soup (no update of its own) is described by its ingredients, one row each;
+    a run's checkpoint by its update and steps, as before."""
+    report = _report_script()
+    run = {"command": "selfplaydrive train seed=1", "update": 10, "slot_steps": 100, "agent_steps": 80}
+    assert "update 10, 100 slot-steps (80 agent-steps)" in report.policy_line(run)
+    parts = [
+        {"run": "a", "seed": 51, "slot_steps": 6000000, "command": "selfplaydrive train seed=51"},
+        {"run": "b", "seed": 53, "slot_steps": 6000000, "command": "selfplaydrive train seed=53"},
+    ]
+    soup = {"command": "python -m selfplaydrive.trainers.soup x a b", "update": None, "ingredients": parts}
+    assert "the mean of the weights of 2 checkpoints" in report.policy_line(soup)
+    lines = report.training_lines(soup)
+    assert "| b | 53 | 6000000 | `selfplaydrive train seed=53` |" in lines
+    assert not any(x.startswith("| update |") for x in lines)
