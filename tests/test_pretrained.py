@@ -297,7 +297,7 @@ def test_candidate_selection_refuses_the_held_out_sets_and_pairs_by_set():
         select.check_seeds([29, 1003])
     with pytest.raises(ValueError, match="repeats a seed"):
         select.check_seeds([29, 29])
-    with pytest.raises(FileNotFoundError, match="nope.pt"):
+    with pytest.raises(FileNotFoundError, match=r"nope\.pt"):
         select.resolve("nope.pt")
     diffs = select.paired({"base": [0.70, 0.80, 0.90], "new": [0.72, 0.84, 0.96]}, "base")
     assert list(diffs) == ["new"]
