@@ -51,12 +51,11 @@ def check_seeds(seeds: list[int]) -> list[int]:
 
 
 def resolve(candidate: str) -> Path:
-    """A checkpoint path; `pretrained` names the shipped policy."""
-    if candidate == "pretrained":
-        from selfplaydrive import pretrained
+    """A checkpoint path (`pretrained` names the shipped policy), checked before any candidate
+    is evaluated."""
+    from selfplaydrive import pretrained
 
-        return Path(pretrained.checkpoint_path())
-    path = Path(candidate)
+    path = Path(pretrained.resolve_spec(candidate))
     if not path.is_file():
         raise FileNotFoundError(f"candidate checkpoint {candidate!r} is not a file")
     return path
