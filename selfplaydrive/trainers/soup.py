@@ -45,7 +45,8 @@ def average_weights(states: Sequence[dict[str, Any]], names: Sequence[str]) -> d
         ValueError: Fewer than two state dicts, or one whose names, shapes or dtypes differ from
             the first's, or unequal non-float tensors; the message names the file and the tensor.
     """
-    import torch
+    with requires_extra("torch"):
+        import torch
 
     if len(states) < 2:
         raise ValueError(f"a soup needs at least two checkpoints, got {len(states)}")
