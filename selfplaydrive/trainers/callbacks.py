@@ -18,7 +18,10 @@ these methods only where the object defines it, in the order the callbacks are l
 - `on_end(trainer, metrics)`: when a `train()` call reaches `trainer.total_updates`.
 - `state_dict()` / `load_state_dict(state)`: the callback's state, saved in every checkpoint
   and restored on resume. It must be plain data (tensors, NumPy arrays, numbers, strings,
-  lists, tuples, dicts): checkpoints are loaded with `weights_only=True`.
+  lists, tuples, dicts): checkpoints are loaded with `weights_only=True`. With
+  `overlap_collection` a checkpoint holds the states taken when the last epoch of its update
+  started (the collector's snapshot, which a resume collects from again), so what `on_update`
+  of that update changed is not in it; `WeightAveraging.on_start` shows one way to catch up.
 
 From Hydra, list callbacks under the trainer config, each a node with a `_target_`:
 
@@ -245,3 +248,81 @@ class TermWeightSchedule:
         # the weight of the rollout this update trained on (with overlap_collection the env
         # already holds the next one's)
         return {f"schedule/{self.term}_weight": self.weight(trainer.update_idx - 1, trainer.total_updates)}
+
+
+class WeightAveraging:
+    """The mean of the policy's weights over the last `fraction` of the updates (iterate
+    averaging, Polyak and Juditsky 1992; Izmailov et al. 2018), put into the model when
+    training ends, so that the final evaluation and `final.pt` use it.
+
+    With the learning rate annealed to zero the last updates move the weights by less and
+    less; their mean removes much of what is left of the per-update noise, the way averaging
+    fine-tunings does for the shipped policy (`trainers/soup.py`). The sum is taken in float64
+    after every update of the window (integer buffers keep their last value) and saved in
+    checkpoints, so a resumed run averages exactly what an uninterrupted one does. A run
+    extended past its end (a resume with a larger `total_steps`) continues from the average.
+    Logged as ``averaging/updates``, the number of updates in the mean so far.
+
+    Args:
+        fraction: Share of the updates, counted from the end, whose weights are averaged, in
+            (0, 1]; 1 averages every update's weights.
+
+    Raises:
+        ConfigError: A fraction outside (0, 1].
+    """
+
+    def __init__(self, fraction: float = 0.2) -> None:
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction <= 1:
+            raise ConfigError(f"WeightAveraging fraction: expected a number in (0, 1], got {fraction!r}")
+        self.fraction = float(fraction)
+        self.sum: dict[str, Any] = {}
+        self.count = 0
+        self.last_update = 0  # the last update whose weights are in the sum
+
+    def first_update(self, total_updates: int) -> int:
+        """The first update (1-based, as `trainer.update_idx` after it) whose weights count."""
+        return max(1, total_updates - max(1, round(self.fraction * total_updates)) + 1)
+
+    def _add(self, trainer: Any) -> None:
+        """Add the model's weights after update `trainer.update_idx`, once, inside the window."""
+        first = self.first_update(trainer.total_updates)
+        if trainer.update_idx <= self.last_update or trainer.update_idx < first:
+            return
+        import torch  # the trainers' extra: callbacks run inside PPOTrainer only
+
+        for name, value in trainer.model.state_dict().items():
+            if value.is_floating_point():
+                value = value.detach().to("cpu", torch.float64)
+                self.sum[name] = value.clone() if name not in self.sum else self.sum[name] + value
+        self.count += 1
+        self.last_update = trainer.update_idx
+
+    def on_start(self, trainer: Any) -> None:
+        # With overlap_collection a checkpoint holds the callbacks' states from before the
+        # update it was written after (the collector's snapshot); the model it holds is that
+        # update's, so the one missing term is added here.
+        self._add(trainer)
+
+    def on_update(self, trainer: Any, metrics: Mapping[str, float]) -> dict[str, float]:
+        self._add(trainer)
+        return {"averaging/updates": float(self.count)}
+
+    def average(self, trainer: Any) -> dict[str, Any]:
+        """The model's state dict with every floating-point tensor replaced by its mean."""
+        state = trainer.model.state_dict()
+        return {
+            name: (self.sum[name] / self.count).to(value.device, value.dtype) if name in self.sum else value
+            for name, value in state.items()
+        }
+
+    def on_end(self, trainer: Any, metrics: Mapping[str, float]) -> None:
+        if self.count:
+            trainer.model.load_state_dict(self.average(trainer))
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"sum": dict(self.sum), "count": self.count, "last_update": self.last_update}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.sum = dict(state["sum"])
+        self.count = int(state["count"])
+        self.last_update = int(state["last_update"])

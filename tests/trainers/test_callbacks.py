@@ -1,6 +1,7 @@
 """Trainer callbacks: the hooks run where the contract says, returned scalars are logged, bad
-entries are refused by index, and DiversityCallback records only the last part of training,
-writes the section 5.4 data and survives a resume exactly."""
+entries are refused by index, DiversityCallback records only the last part of training,
+writes the section 5.4 data and survives a resume exactly, and WeightAveraging ends a run
+with the mean of its last weights."""
 
 from __future__ import annotations
 
@@ -9,12 +10,17 @@ import json
 import numpy as np
 import pytest
 import torch
-from ppo_helpers import TinyPolicy, lane_env
+from ppo_helpers import TinyPolicy, lane_env, resume_trainer
 
 from selfplaydrive.builder import compose, instantiate
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
-from selfplaydrive.trainers.callbacks import DiversityCallback, TermWeightSchedule, build_callbacks
+from selfplaydrive.trainers.callbacks import (
+    DiversityCallback,
+    TermWeightSchedule,
+    WeightAveraging,
+    build_callbacks,
+)
 
 T = 6  # rollout_length
 CFG = dict(
@@ -170,3 +176,78 @@ def test_term_weight_schedule_sets_each_rollout_and_runs_repeat_exactly(overlap)
     assert weights_b == weights
     for name, p in a.model.state_dict().items():
         assert torch.equal(p, b.model.state_dict()[name]), name
+
+
+class WeightLog:
+    """Keeps a copy of the model's weights after every update (listed before the averaging)."""
+
+    def __init__(self) -> None:
+        self.states: list[dict[str, torch.Tensor]] = []
+
+    def on_update(self, trainer, metrics) -> None:
+        self.states.append({k: v.detach().clone() for k, v in trainer.model.state_dict().items()})
+
+
+def test_weight_averaging_window_and_mean_by_hand():
+    cb = WeightAveraging(fraction=0.2)
+    assert [cb.first_update(n) for n in (10, 854, 3, 1)] == [9, 684, 3, 1]  # last 2, 171, 1, 1
+    assert WeightAveraging(fraction=1.0).first_update(10) == 1
+
+    class Model(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.w = torch.nn.Parameter(torch.zeros(2))
+            self.register_buffer("steps", torch.zeros((), dtype=torch.long))
+
+    class Fake:  # the two attributes the callback reads
+        total_updates, update_idx, model = 10, 0, Model()
+
+    fake = Fake()
+    for i in range(1, 11):  # update i leaves w = [i, -i] and the counter at i
+        fake.update_idx = i
+        with torch.no_grad():
+            fake.model.w.copy_(torch.tensor([i, -i], dtype=torch.float32))
+            fake.model.steps.fill_(i)
+        logged = cb.on_update(fake, {})
+    assert logged == {"averaging/updates": 2.0} and cb.count == 2
+    cb.on_end(fake, {})
+    assert fake.model.w.tolist() == [9.5, -9.5]  # mean of updates 9 and 10
+    assert int(fake.model.steps) == 10  # an integer buffer keeps its last value
+    for bad in (0, 1.5, -0.1, True, "0.2"):
+        with pytest.raises(ConfigError, match=r"WeightAveraging fraction: expected a number in \(0, 1\]"):
+            WeightAveraging(fraction=bad)
+
+
+@pytest.mark.parametrize("overlap", [False, True])
+def test_weight_averaging_ends_with_the_mean_and_survives_a_resume(tmp_path, overlap):
+    torch.set_num_threads(1)  # as in test_overlap.py: the same bits in every run of the process
+    steps = 5 * 3 * 4 * 12  # 5 updates of 3 worlds x 4 slots x 12 steps; averaged: the last 3
+    log, avg = WeightLog(), WeightAveraging(fraction=0.6)
+    a = resume_trainer(tmp_path / "a", 0, total_steps=steps, overlap_collection=overlap, callbacks=[log, avg])
+    a.train(4)  # inside the window: updates 3 and 4 are in the sum
+    a.save(tmp_path / "mid.pt")
+    a.train()
+    assert avg.count == 3
+    moved = 0
+    for name, value in a.model.state_dict().items():
+        if value.is_floating_point():
+            mean = sum(s[name].double() for s in log.states[2:]) / 3
+            torch.testing.assert_close(value, mean.to(value.dtype), rtol=0, atol=1e-7, msg=name)
+            moved += not torch.equal(value, log.states[-1][name])
+    assert moved > 0  # the mean is not the last update's weights
+    b_avg = WeightAveraging(fraction=0.6)
+    b = resume_trainer(
+        tmp_path / "b", 1, total_steps=steps, overlap_collection=overlap, callbacks=[WeightLog(), b_avg]
+    )
+    b.load(tmp_path / "mid.pt")
+    b.train()
+    assert b_avg.count == 3
+    for name, value in a.model.state_dict().items():
+        assert torch.equal(value, b.model.state_dict()[name]), name
+
+
+def test_weight_averaging_from_the_trainer_config():
+    target = "selfplaydrive.trainers.callbacks.WeightAveraging"
+    cfg = compose("train", [f"trainer.callbacks=[{{_target_: {target}, fraction: 0.3}}]"])
+    config = instantiate(cfg.trainer)
+    assert isinstance(config.callbacks[0], WeightAveraging) and config.callbacks[0].fraction == 0.3
