@@ -255,9 +255,9 @@ class WeightAveraging:
     averaging, Polyak and Juditsky 1992; Izmailov et al. 2018), put into the model when
     training ends, so that the final evaluation and `final.pt` use it.
 
-    With the learning rate annealed to zero the last updates move the weights by less and
-    less; their mean removes much of what is left of the per-update noise, the way averaging
-    fine-tunings does for the shipped policy (`trainers/soup.py`). The sum is taken in float64
+    The mean can smooth out the noise of the last updates, as averaging fine-tunings did for
+    the shipped policy (`trainers/soup.py`); on the main job it did not help (docs/training.md,
+    "Callbacks": its policy still improves while the learning rate runs out). The sum is taken in float64
     after every update of the window (integer buffers keep their last value) and saved in
     checkpoints, so a resumed run averages exactly what an uninterrupted one does. A run
     extended past its end (a resume with a larger `total_steps`) continues from the average.
