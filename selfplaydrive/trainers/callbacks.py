@@ -288,11 +288,9 @@ class WeightAveraging:
         first = self.first_update(trainer.total_updates)
         if trainer.update_idx <= self.last_update or trainer.update_idx < first:
             return
-        import torch  # the trainers' extra: callbacks run inside PPOTrainer only
-
         for name, value in trainer.model.state_dict().items():
             if value.is_floating_point():
-                value = value.detach().to("cpu", torch.float64)
+                value = value.detach().cpu().double()  # tensor methods: no torch import here
                 self.sum[name] = value.clone() if name not in self.sum else self.sum[name] + value
         self.count += 1
         self.last_update = trainer.update_idx
