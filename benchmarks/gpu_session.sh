@@ -2,6 +2,7 @@
 # GPU measurements of issue #16 item 4 on a lent device machine (docs/benchmarks.md, "GPU").
 #
 #   bash benchmarks/gpu_session.sh bench              # build, smoke run, throughput A/B pairs
+#   bash benchmarks/gpu_session.sh bench2             # build, more A/B pairs (bf16, page-locking)
 #   bash benchmarks/gpu_session.sh train SPEC...      # build, then training runs side by side
 #   DEADLINE=<epoch s> bash benchmarks/gpu_session.sh all SPEC...   # both; SPEC limits "auto"
 #
@@ -59,15 +60,19 @@ bench() {  # bench NAME SECONDS OVERRIDES... -- BASELINE-OVERRIDES...
 if [ "$part" = bench ] || [ "$part" = all ]; then
     step smoke 60 python3 -m selfplaydrive.cli train trainer.device=cuda env.num_worlds=4 \
         trainer.total_steps=8192 trainer.eval_episodes=2 logger=jsonl hydra.run.dir="$W/smoke_run"
-    # paper Deep Sets at the paper's world count (512 x 32 = 16,384 slots), bf16 vs fp32
+    # the Transformer at its paper world count (128 x 32 = 4,096 slots), bf16 vs fp32
+    bench tf_bf16_fp32 170 experiment=paper_transformer map=tartu --updates 2 \
+        --baseline-overrides trainer.precision=fp32
+    # paper Deep Sets (512 x 32 = 16,384 slots, bf16): the next rollout collected during the
+    # update's last epoch (overlap_collection) vs collection after the update
+    bench ds_overlap 230 experiment=paper_deepsets map=tartu --updates 3 trainer.overlap_collection=true \
+        --baseline-overrides trainer.overlap_collection=false
+fi
+if [ "$part" = bench2 ]; then  # the comparisons of session 10's `bench`
     bench ds_bf16_fp32 200 experiment=paper_deepsets map=tartu --updates 3 \
         --baseline-overrides trainer.precision=fp32
-    # uploads read the env's page-locked buffers vs pinned staging copies
     bench ds_register 150 experiment=paper_deepsets map=tartu --updates 2 \
         --baseline-overrides trainer.host_register=false
-    # the Transformer at its paper world count (128 x 32 = 4,096 slots), bf16 vs fp32
-    bench tf_bf16_fp32 150 experiment=paper_transformer map=tartu --updates 2 \
-        --baseline-overrides trainer.precision=fp32
 fi
 if [ "$part" = train ] || [ "$part" = all ]; then
     for spec in "$@"; do
