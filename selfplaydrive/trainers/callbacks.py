@@ -212,32 +212,41 @@ def _restore_recorder(recorder: Any, state: Mapping[str, Any]) -> None:
 class TermWeightSchedule:
     """A reward term's weight moved linearly over training, e.g. a collision penalty that grows
     once the policy drives (docs/training.md "Callbacks"): the weight of rollout i is
-    ``start + (end - start) * min(1, i / (fraction * total_updates))``, set on the env before
-    the rollout's first step (`VecEnv.set_term_weight`). It depends only on the rollout's
-    index, so a resumed run continues the schedule exactly; the final evaluation runs at the
-    last weight. Logged as ``schedule/<term>_weight``.
+    ``start + (end - start) * clip((i - begin * T) / (fraction * T), 0, 1)`` for a run of T
+    updates, set on the env before the rollout's first step (`VecEnv.set_term_weight`). It
+    depends only on the rollout's index, so a resumed run continues the schedule exactly; the
+    final evaluation runs at the last weight. Logged as ``schedule/<term>_weight``.
 
     Args:
         term: A reward column of the env (`env.term_names`), e.g. "collision".
-        start: Weight of the first rollout.
-        end: Weight from `fraction` of the updates on.
+        start: Weight of the first rollout (until `begin` of the updates).
+        end: Weight from `begin + fraction` of the updates on.
         fraction: Share of the updates over which the weight moves, in (0, 1].
+        begin: Share of the updates before the weight starts to move, in [0, 1): a late
+            ramp leaves the first part of training, where the policy learns to drive, alone.
 
     Raises:
-        ConfigError: A weight that is not a finite number or a fraction outside (0, 1].
+        ConfigError: A weight that is not a finite number, a fraction outside (0, 1] or a
+            begin outside [0, 1).
     """
 
-    def __init__(self, term: str, start: float, end: float, fraction: float = 1.0) -> None:
+    def __init__(
+        self, term: str, start: float, end: float, fraction: float = 1.0, begin: float = 0.0
+    ) -> None:
         for key, value in (("start", start), ("end", end)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"TermWeightSchedule {key}: expected a finite number, got {value!r}")
         if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction <= 1:
             raise ConfigError(f"TermWeightSchedule fraction: expected a number in (0, 1], got {fraction!r}")
+        if isinstance(begin, bool) or not isinstance(begin, (int, float)) or not 0 <= begin < 1:
+            raise ConfigError(f"TermWeightSchedule begin: expected a number in [0, 1), got {begin!r}")
         self.term, self.start, self.end, self.fraction = str(term), float(start), float(end), float(fraction)
+        self.begin = float(begin)
 
     def weight(self, rollout: int, total_updates: int) -> float:
         """The weight of rollout `rollout` (0-based) of a run of `total_updates` updates."""
-        progress = min(1.0, rollout / max(1e-9, self.fraction * total_updates))
+        moved = rollout - self.begin * total_updates
+        progress = min(1.0, max(0.0, moved / max(1e-9, self.fraction * total_updates)))
         return self.start + (self.end - self.start) * progress
 
     def on_rollout(self, trainer: Any) -> None:
