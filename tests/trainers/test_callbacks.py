@@ -154,7 +154,7 @@ def test_term_weight_schedule_values_by_hand():
     # 10 updates: the weight moves over the first 5 rollouts, 0.4 per rollout, then stays
     got = [schedule.weight(i, 10) for i in range(10)]
     assert got == pytest.approx([1.0, 1.4, 1.8, 2.2, 2.6, 3.0, 3.0, 3.0, 3.0, 3.0])
-    # a late ramp: held at 1 for the first 6 of 10 rollouts, then 0.5 per rollout up to 3
+    # a late ramp: held at 1 up to rollout 6 (begin * T), then 0.5 per rollout up to 3
     late = TermWeightSchedule("collision", start=1.0, end=3.0, fraction=0.4, begin=0.6)
     assert [late.weight(i, 10) for i in range(10)] == pytest.approx([1.0] * 7 + [1.5, 2.0, 2.5])
     assert late.weight(10, 10) == 3.0
