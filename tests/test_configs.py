@@ -244,6 +244,9 @@ def test_every_trainer_option_instantiates(option):
     used = trainer.to_dict()
     expected = OmegaConf.to_container(cfg.trainer, resolve=True)
     expected.pop("_target_")
+    # to_dict names each callback by its class (its settings are in the resolved config)
+    callbacks = expected.pop("callbacks", [])
+    assert used.get("callbacks", []) == [c["_target_"] for c in callbacks]
     assert {k: used[k] for k in expected} == expected
     assert used["seed"] == 7  # follows the top-level seed
 
