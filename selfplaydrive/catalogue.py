@@ -32,12 +32,14 @@ def _rows(text: str) -> tuple[str, list[tuple[str, str, str]]]:
         if not rows and line.startswith("#"):
             header.append(line.lstrip("# ").rstrip())
             continue
-        m = _LINE.match(line)
-        if not m or m["key"] in ("defaults", "hydra"):
+        # a list item's keys ("- _target_: ...", then "  term: ...") sit under the list's key
+        m = _LINE.match(re.sub(r"^(\s*)- ", r"\1  ", line))
+        if not m:
             continue
-        depth = len(m["indent"]) // 2
-        stack = [*stack[:depth], m["key"]]
-        rows.append((".".join(stack), m["value"], m["comment"] or ""))
+        indent = len(m["indent"])
+        stack = [(i, k) for i, k in stack if i < indent] + [(indent, m["key"])]
+        if stack[0][1] not in ("defaults", "hydra"):
+            rows.append((".".join(k for _, k in stack), m["value"], m["comment"] or ""))
     return " ".join(h for h in header if h and not h.startswith("@package")), rows
 
 
