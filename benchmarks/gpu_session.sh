@@ -5,10 +5,21 @@
 #   bash benchmarks/gpu_session.sh bench2             # build, more A/B pairs (bf16, page-locking)
 #   bash benchmarks/gpu_session.sh train SPEC...      # build, then training runs side by side
 #   DEADLINE=<epoch s> bash benchmarks/gpu_session.sh all SPEC...   # both; SPEC limits "auto"
+#   bash benchmarks/gpu_session.sh long SPEC          # build, one run, continued across calls
 #
 # SPEC is NAME:ENV_THREADS:SECONDS:OVERRIDES (overrides separated by commas); SECONDS "auto"
 # runs until 20 s before $DEADLINE. Each run's learning curve (benchmarks/learning_curve.py)
 # is printed at the end.
+#
+# `long` trains one run longer than a device call (or a session's device budget) allows. It
+# starts the run, or resumes it (`resume=`) when the call carried its folder in .gpu_runs/NAME
+# (ignored by git), and returns the folder with its newest checkpoint as $OUT/NAME_run.tgz:
+#   tar xzf <files_at>/NAME_run.tgz -C .gpu_runs     # here, then the next call (or session)
+#   run carry=[".whl", ".maps", ".gpu_runs"]  bash benchmarks/gpu_session.sh long SPEC
+# with the same SPEC each time (the env and model must match the checkpoint; `total_steps` sets
+# the learning-rate schedule, so fix it in the first call). Give the run
+# `trainer.checkpoint_interval` of about a minute of updates: a killed call loses what came
+# after its last checkpoint. learning_curve.py leaves the pauses between calls out of its minutes.
 #
 # Sizing (session 10, H100 + 16-core Xeon): the build takes 35-47 s; a paper-size bench worker
 # needs ~40 s to start and warm up and ~14 s per update, so `bench` needs about 10 minutes,
@@ -73,6 +84,23 @@ if [ "$part" = bench2 ]; then  # the comparisons of session 10's `bench`
         --baseline-overrides trainer.precision=fp32
     bench ds_register 150 experiment=paper_deepsets map=tartu --updates 2 \
         --baseline-overrides trainer.host_register=false
+fi
+if [ "$part" = long ]; then
+    IFS=: read -r name threads limit ovr <<<"${1:?long needs one SPEC}"
+    # the same absolute folder on every machine, so that the checkpoint's records stay true
+    start=("hydra.run.dir=$W/$name")
+    if [ -d ".gpu_runs/$name" ]; then  # continue it there; this call's Hydra folder gets resume.json
+        rm -rf "${W:?}/$name" && cp -r ".gpu_runs/$name" "$W/$name" &&
+            start=("resume=$W/$name" "hydra.run.dir=$W/${name}_call$(date +%s)")
+    fi
+    echo "== long $name: $limit s, ${start[*]}, $ovr"
+    timeout -k 5 "$limit" python3 -m selfplaydrive.cli train logger=jsonl trainer.device=cuda \
+        trainer.progress_bar=false env.num_threads="$threads" "${start[@]}" ${ovr//,/ } >>"$W/$name.log" 2>&1
+    echo "== long $name: rc $?"
+    tail -n 4 "$W/$name.log"
+    python3 benchmarks/learning_curve.py "$W/$name/metrics.jsonl" | tee "$W/$name.curve.txt"
+    pack
+    tar czf "$OUT/${name}_run.tgz" -C "$W" "$name"
 fi
 if [ "$part" = train ] || [ "$part" = all ]; then
     for spec in "$@"; do

@@ -39,3 +39,15 @@ def test_minutes_to_each_threshold_count_from_the_runs_start(curve, tmp_path):
     assert out[3] == "best: 62.0% at 2.00 min"
     assert len(out) == 4 + 1 + 2  # header and the first and last rows
     assert curve.summary([], [0.5]) == ["no update with a finished world-episode was logged"]
+
+
+def test_a_resumed_run_counts_its_training_minutes_not_the_pause(curve):
+    # 60 s per 1,000 slot-steps at the logged 1,000 slot-steps/s... then a day's pause before the
+    # resumed process logged step 4,000 (its own time: 1 s at that rate)
+    rows = [row(1000, 100.0, 0.1), row(2000, 160.0, 0.3), row(3000, 220.0, 0.4), row(4000, 86_620.0, 0.85)]
+    assert curve.training_seconds(rows) == [1.0, 61.0, 121.0, 122.0]
+    out = curve.summary(rows, [0.8], points=2)
+    assert out[0] == "completion >= 80%: 2.03 min, 4,000 slot-steps"
+    # a gap within PAUSE_S of the update's own time is the clock's (a slow update, not a pause)
+    rows[3]["time"] = 220.0 + 1.0 + curve.PAUSE_S
+    assert curve.training_seconds(rows)[3] == 121.0 + 1.0 + curve.PAUSE_S
