@@ -51,7 +51,8 @@ def main() -> None:
     compiled = torch.compile(trainer.minibatch_loss)
     first = step(compiled)
     for _ in range(3):  # warm both
-        step(compiled), step(eager)
+        step(compiled)
+        step(eager)
     times: dict[str, list[float]] = {"eager": [], "compiled": []}
     for _ in range(args.rounds):
         times["eager"].append(step(eager))

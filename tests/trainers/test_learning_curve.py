@@ -42,8 +42,8 @@ def test_minutes_to_each_threshold_count_from_the_runs_start(curve, tmp_path):
 
 
 def test_a_resumed_run_counts_its_training_minutes_not_the_pause(curve):
-    # 60 s per 1,000 slot-steps at the logged 1,000 slot-steps/s... then a day's pause before the
-    # resumed process logged step 4,000 (its own time: 1 s at that rate)
+    # the clock's 60 s between rows (within PAUSE_S of the rate's 1 s, so counted as they are), then
+    # a day's pause before the resumed process logged step 4,000: counted as its own 1 s
     rows = [row(1000, 100.0, 0.1), row(2000, 160.0, 0.3), row(3000, 220.0, 0.4), row(4000, 86_620.0, 0.85)]
     assert curve.training_seconds(rows) == [1.0, 61.0, 121.0, 122.0]
     out = curve.summary(rows, [0.8], points=2)
