@@ -9,6 +9,7 @@ optionally alternated with an earlier build of the trainer and models in the sam
     python benchmarks/bench_train.py --json trainer.torch_threads=2 env.num_threads=2
     python benchmarks/bench_train.py trainer.torch_threads=2 --baseline-overrides trainer.torch_threads=1
     python benchmarks/bench_train.py trainer.torch_threads=2 --baseline-env OMP_WAIT_POLICY=passive
+    python benchmarks/bench_train.py --baseline HEAD~1 --init-from pretrained <its env overrides>
 
 (Hydra overrides first: `--baseline-overrides` / `--baseline-env` take every word after them.)
 
@@ -21,6 +22,13 @@ over the counted updates of active agent-steps/s (wall), agent-steps per CPU-sec
 worker (`time.process_time`, all its threads), collection-only agent-steps/s, and the share
 of wall time in env.step, policy inference (the rest of collection), advantages (GAE) and the
 PPO epochs; with a baseline, the ratio of the medians and the median of the per-round ratios.
+
+Agent-steps count the slots that act, and a build whose update skips the others costs less per
+update when fewer act; two builds that learn from the same start soon drive differently and
+keep different numbers of agents alive. So slot-steps/s and the acting share are reported too,
+and `--init-from` starts both builds from the same weights (a checkpoint, or "pretrained");
+with `trainer.learning_rate=1e-12` both then act with the same policy throughout: the same
+work for both, the trainer's speed alone (docs/benchmarks.md, "Trainer").
 """
 
 from __future__ import annotations
@@ -191,12 +199,25 @@ def install_overlay(overlay: str | None):
     return seed_everything
 
 
-def worker(overrides: list[str], overlay: str | None) -> None:
-    """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin."""
+def worker(overrides: list[str], overlay: str | None, init_from: str | None = None) -> None:
+    """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin.
+    `init_from`: load these weights first (read by this tree's checkpoint code, whichever
+    build runs: an older build may not read the checkpoint's format)."""
+    weights = None
+    if init_from:
+        from selfplaydrive.policies import load_checkpoint
+        from selfplaydrive.pretrained import resolve_spec
+
+        weights = load_checkpoint(resolve_spec(init_from))["model"]
     seed_everything = install_overlay(overlay)
     import torch
 
     trainer, cfg = build_trainer(overrides, seed_everything)
+    if weights is not None:
+        trainer.model.load_state_dict(dict(weights))
+        actor = getattr(trainer, "actor", trainer.model)  # overlap_collection's copy
+        if actor is not trainer.model:
+            actor.load_state_dict(trainer.model.state_dict())
     env_time = timed_env_step(trainer.env)
     t0 = time.perf_counter()
     trainer.train(num_updates=1)  # warm-up: allocations, first reset, compiling (trainer.compile)
@@ -216,6 +237,8 @@ def worker(overrides: list[str], overlay: str | None) -> None:
         "precision": str(getattr(trainer, "amp_dtype", None) or "fp32"),
         "staged_uploads": sorted(getattr(trainer._to_device, "failed", {})),
         "trainer_file": sys.modules[type(trainer).__module__].__file__,
+        "slots_per_update": trainer.slots_per_update,
+        "init_from": init_from,
     }
     print(json.dumps(info), flush=True)
     for line in sys.stdin:
@@ -232,9 +255,15 @@ class Worker:
     """A worker process of one build (`overlay`: the baseline's exported tree, or None)."""
 
     def __init__(
-        self, label: str, overrides: list[str], overlay: Path | None, env: dict[str, str] | None = None
+        self,
+        label: str,
+        overrides: list[str],
+        overlay: Path | None,
+        env: dict[str, str] | None = None,
+        init_from: str | None = None,
     ) -> None:
         cmd = [sys.executable, __file__, "--worker", *(["--overlay", str(overlay)] if overlay else [])]
+        cmd += ["--init-from", init_from] if init_from else []
         self.label = label
         self.proc = subprocess.Popen(
             [*cmd, "--", *overrides],
@@ -274,11 +303,14 @@ def rate(u: dict[str, float]) -> float:
     return u["agent_steps"] / u["wall_s"]
 
 
-def summarize(updates: list[dict[str, float]]) -> dict[str, float]:
-    """Medians over updates: agent-steps/s (wall, CPU, collection) and phase shares."""
+def summarize(updates: list[dict[str, float]], slots: int) -> dict[str, float]:
+    """Medians over updates: agent-steps/s (wall, CPU, collection), slot-steps/s (`slots`
+    slot-steps an update), the acting share and the phase shares."""
     med = statistics.median
     out = {
         "agent_steps_per_s": med(rate(u) for u in updates),
+        "slot_steps_per_s": med(slots / u["wall_s"] for u in updates),
+        "acting_share": med(u["agent_steps"] / slots for u in updates),
         "agent_steps_per_cpu_s": med(u["agent_steps"] / u["cpu_s"] for u in updates),
         "collect_agent_steps_per_s": med(u["agent_steps"] / u["collect_s"] for u in updates),
         "wall_s_per_update": med(u["wall_s"] for u in updates),
@@ -294,6 +326,7 @@ def run(
     baseline: str | None,
     baseline_overrides: list[str] = (),
     baseline_env: dict[str, str] | None = None,
+    init_from: str | None = None,
 ) -> dict[str, object]:
     """Alternate the workers for `updates` rounds; returns the summary.
 
@@ -302,14 +335,16 @@ def run(
     compare settings of one build) are given; without a revision it runs this tree."""
     load0 = os.getloadavg()
     compare = bool(baseline or baseline_overrides or baseline_env)
+    if init_from and init_from != "pretrained":
+        init_from = str(Path(init_from).resolve())  # the workers run in the repository root
     with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
-        workers = [Worker("current", overrides, None)]
+        workers = [Worker("current", overrides, None, init_from=init_from)]
         if baseline:
             export_build(baseline, Path(tmp))
         if compare:
             label = " ".join(["baseline", baseline or "(this tree)", *baseline_overrides])
             overlay = Path(tmp) if baseline else None
-            workers.append(Worker(label, [*overrides, *baseline_overrides], overlay, baseline_env))
+            workers.append(Worker(label, [*overrides, *baseline_overrides], overlay, baseline_env, init_from))
         try:
             for i in range(updates):
                 for w in workers if i % 2 == 0 else workers[::-1]:
@@ -330,7 +365,7 @@ def run(
             **w.info,
             "rev": w.label[len("baseline ") :] if key == "baseline" else "working tree",
             "env": baseline_env if key == "baseline" else {},
-            **summarize(w.updates),
+            **summarize(w.updates, int(w.info["slots_per_update"])),
         }
     if compare:
         cur, base = workers[0].updates, workers[1].updates
@@ -342,6 +377,9 @@ def run(
         )
         result["cpu_ratio_of_medians"] = (
             result["current"]["agent_steps_per_cpu_s"] / result["baseline"]["agent_steps_per_cpu_s"]
+        )
+        result["slot_ratio_of_medians"] = (
+            result["current"]["slot_steps_per_s"] / result["baseline"]["slot_steps_per_s"]
         )
     return result
 
@@ -363,13 +401,15 @@ def report(result: dict[str, object]) -> str:
             f"{r['agent_slots']} slots, torch threads {r['torch_threads']}, env threads {r['env_threads']}: "
             f"{r['agent_steps_per_s']:,.0f} agent-steps/s overall, "
             f"{r['agent_steps_per_cpu_s']:,.0f} per CPU-s, "
-            f"{r['collect_agent_steps_per_s']:,.0f} collecting; time: {shares}; "
+            f"{r['collect_agent_steps_per_s']:,.0f} collecting; {r['slot_steps_per_s']:,.0f} slot-steps/s, "
+            f"acting share {r['acting_share']:.0%}; time: {shares}; "
             f"warm-up update {r['warmup_s']:.1f} s"
         )
     if "ratio_of_medians" in result:
         lines.append(
             f"current / baseline: {result['ratio_of_medians']:.2f}x (median of per-round ratios "
-            f"{result['median_round_ratio']:.2f}x, per CPU-second {result['cpu_ratio_of_medians']:.2f}x)"
+            f"{result['median_round_ratio']:.2f}x, per CPU-second {result['cpu_ratio_of_medians']:.2f}x); "
+            f"slot-steps/s {result['slot_ratio_of_medians']:.2f}x"
         )
     return "\n".join(lines)
 
@@ -399,16 +439,22 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="environment of the baseline worker",
     )
+    parser.add_argument(
+        "--init-from",
+        metavar="CKPT",
+        help='start every build from these weights (a checkpoint, or "pretrained"); with '
+        "trainer.learning_rate=1e-12 both act with the same policy throughout",
+    )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--json-out", metavar="FILE", help="also write the summary as JSON to FILE")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--overlay", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        worker(args.overrides, args.overlay)
+        worker(args.overrides, args.overlay, args.init_from)
         return
     env = dict(item.split("=", 1) for item in args.baseline_env)
-    result = run(args.overrides, args.updates, args.baseline, args.baseline_overrides, env)
+    result = run(args.overrides, args.updates, args.baseline, args.baseline_overrides, env, args.init_from)
     print(json.dumps(result) if args.json else report(result))
     if args.json_out:
         Path(args.json_out).write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")

@@ -9,7 +9,7 @@ import torch
 from torch import nn
 
 from selfplaydrive.models import DeepSetsModel, TransformerModel
-from selfplaydrive.models.common import encode_max, few_winners, masked_max
+from selfplaydrive.models.common import encode_max, few_winners, first_max_index, masked_max, padding_bias
 from selfplaydrive.obs.layout import ObsLayout
 
 LAYOUT = ObsLayout(max_objects=6, max_road=40)
@@ -83,6 +83,40 @@ def test_masked_max_gradient_goes_to_the_winner_only() -> None:
     assert out.tolist() == [[3.0, 4.0]]
     out.sum().backward()
     assert x.grad.tolist() == [[[0.0, 1.0], [1.0, 0.0], [0.0, 0.0]]]
+
+
+@pytest.mark.parametrize(("rows", "n", "width"), [(64, 1, 4), (300, 20, 32), (40, 64, 8), (9, 300, 5)])
+def test_first_max_index_is_torch_max_indices_on_random_sets(rows: int, n: int, width: int) -> None:
+    """The NumPy-free reference is torch's own `max(dim=1).indices` (the first maximum on the
+    CPU): equal on random sets with exact ties, padding (-inf) and all-padding rows."""
+    gen = torch.Generator().manual_seed(rows + n)
+    x = torch.randn(rows, n, width, generator=gen)
+    if n > 3:
+        x[:, 3] = x[:, 1]  # exact ties: the first of them wins
+        x[::3, 2] = x[::3, 1]
+    valid = torch.rand(rows, n, generator=gen) < 0.6
+    valid[0] = False  # every element padding
+    x = x + padding_bias(valid)
+    got = first_max_index(x)
+    assert got.dtype == torch.int64 and got.shape == (rows, width)
+    assert torch.equal(got, x.max(dim=1).indices)
+    assert torch.equal(got[0], torch.zeros(width, dtype=torch.int64))
+
+
+def test_first_max_index_by_hand() -> None:
+    x = torch.tensor([[[1.0, 5.0], [3.0, 5.0], [3.0, -1.0]]])  # (1, 3, 2)
+    assert first_max_index(x).tolist() == [[1, 0]]  # 3 first at element 1; 5 first at element 0
+    bf16 = first_max_index(x.to(torch.bfloat16))
+    assert bf16.tolist() == [[1, 0]]
+
+
+def test_padding_bias_is_masked_fill_with_minus_inf() -> None:
+    gen = torch.Generator().manual_seed(7)
+    x = torch.randn(30, 12, 6, generator=gen)
+    valid = torch.rand(30, 12, generator=gen) < 0.5
+    expected = x.masked_fill(~valid.unsqueeze(-1), float("-inf"))
+    assert torch.equal(x + padding_bias(valid), expected)
+    assert padding_bias(valid).shape == (30, 12, 1)
 
 
 def test_few_winners_decides_by_the_expected_winner_count() -> None:

@@ -80,8 +80,10 @@ def test_summary_takes_medians_and_phase_shares(bench):
             "update": 1.0,
         },
     ]
-    out = bench.summarize(updates)
+    out = bench.summarize(updates, slots=1000)
     assert out["agent_steps_per_s"] == 300  # rates 100, 300, 500
+    assert out["slot_steps_per_s"] == 1000  # 1000 slot-steps in 1, 1, 2 s: 1000, 1000, 500
+    assert out["acting_share"] == pytest.approx(0.3)  # 0.1, 0.3, 1.0
     assert out["agent_steps_per_cpu_s"] == 300  # 50, 300, 500
     assert out["collect_agent_steps_per_s"] == 600  # 200, 600, 1000
     assert out["share_env_step"] == pytest.approx(0.1)  # 0.1, 0.2, 0.1
