@@ -92,12 +92,15 @@ class RolloutStorage:
 
     def minibatch(self, slots: Tensor) -> dict[str, Tensor | State]:
         """Every field restricted to the agent slots `slots` ((B,) int64): (T, B, ...) tensors
-        and the initial recurrent state of those slots, so BPTT sequences stay whole."""
+        and the initial recurrent state of those slots, so BPTT sequences stay whole.
+
+        `index_select` rather than indexing with `slots`: the same copy, about 3x faster for
+        the observations on the CPU (docs/benchmarks.md, "Trainer")."""
         out: dict[str, Tensor | State] = {}
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name == "initial_state":
-                out[f.name] = tuple(s[slots] for s in value)
+                out[f.name] = tuple(s.index_select(0, slots) for s in value)
             else:
-                out[f.name] = value[:, slots]
+                out[f.name] = value.index_select(1, slots)
         return out
