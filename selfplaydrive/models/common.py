@@ -272,8 +272,14 @@ def first_max_index(x: Tensor) -> Tensor:
     CPU comparisons, which write bools, are about 6x slower than float arithmetic here; and
     the steps work in place on one buffer, since every fresh buffer of a chunk's size costs
     more in page faults than the arithmetic does. A row whose elements are all -inf (padding)
-    gives index 0, as `max` does."""
-    n = x.shape[1]
+    gives index 0, as `max` does.
+
+    Below 32 dimensions torch's CPU `amax` over the set axis takes a slow path of its own (16
+    dimensions: 0.2-0.5 ms a chunk, against 0.03 ms at 32), and `max` is the faster of the two
+    there (docs/benchmarks.md, "Trainer", session 37); both give the same indices."""
+    n, width = x.shape[1], x.shape[2]
+    if width < 32 and x.device.type == "cpu":
+        return x.max(dim=1).indices
     # float32 ranks whatever x's dtype: integers up to 2**24 exactly (bf16 only up to 256)
     rank = torch.arange(n, 0, -1, dtype=torch.float32, device=x.device).view(1, n, 1)
     score = (x - x.amax(dim=1, keepdim=True)).float()  # 0 at the maximum, < 0 below it

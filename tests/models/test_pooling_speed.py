@@ -85,7 +85,7 @@ def test_masked_max_gradient_goes_to_the_winner_only() -> None:
     assert x.grad.tolist() == [[[0.0, 1.0], [1.0, 0.0], [0.0, 0.0]]]
 
 
-@pytest.mark.parametrize(("rows", "n", "width"), [(64, 1, 4), (300, 20, 32), (40, 64, 8), (9, 300, 5)])
+@pytest.mark.parametrize(("rows", "n", "width"), [(64, 1, 4), (300, 20, 32), (40, 64, 48), (9, 300, 33)])
 def test_first_max_index_is_torch_max_indices_on_random_sets(rows: int, n: int, width: int) -> None:
     """The NumPy-free reference is torch's own `max(dim=1).indices` (the first maximum on the
     CPU): equal on random sets with exact ties, padding (-inf) and all-padding rows."""
@@ -106,8 +106,9 @@ def test_first_max_index_is_torch_max_indices_on_random_sets(rows: int, n: int, 
 def test_first_max_index_by_hand() -> None:
     x = torch.tensor([[[1.0, 5.0], [3.0, 5.0], [3.0, -1.0]]])  # (1, 3, 2)
     assert first_max_index(x).tolist() == [[1, 0]]  # 3 first at element 1; 5 first at element 0
-    bf16 = first_max_index(x.to(torch.bfloat16))
-    assert bf16.tolist() == [[1, 0]]
+    wide = x.repeat(1, 1, 16)  # 32 dimensions: the vectorised path, not torch's max
+    assert first_max_index(wide).tolist() == [[1, 0] * 16]
+    assert first_max_index(wide.to(torch.bfloat16)).tolist() == [[1, 0] * 16]
 
 
 def test_padding_bias_is_masked_fill_with_minus_inf() -> None:
