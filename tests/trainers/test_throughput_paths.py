@@ -213,17 +213,18 @@ def test_trainer_compile_option(monkeypatch, recwarn):
 
 
 @pytest.mark.slow
-def test_compiled_pooling_matches_eager_values_and_gradients():
+@pytest.mark.parametrize("width", [8, 32])  # torch's max below 32 dimensions, first_max_index from 32
+def test_compiled_pooling_matches_eager_values_and_gradients(width: int):
     torch.manual_seed(6)
-    enc = DeepSetsModel(ObsLayout(max_objects=2, max_road=2), input_size=8).road_encoder
-    x = torch.rand(20, 40, enc[0].in_features)
-    valid = torch.rand(20, 40) < 0.8
-    weight = torch.randn(20, 8)
+    enc = DeepSetsModel(ObsLayout(max_objects=2, max_road=2), input_size=width).road_encoder
+    x = torch.rand(20, 80, enc[0].in_features)
+    valid = torch.rand(20, 80) < 0.8
+    weight = torch.randn(20, width)
     compiled = PoolKernels.compiled()
     grads = []
     for kernels in (EAGER_POOLING, compiled):
         enc.zero_grad()
-        out = encode_max(enc, x, valid, 8, kernels)
+        out = encode_max(enc, x, valid, width, kernels)
         (out * weight).sum().backward()
         grads.append((out.detach(), [p.grad.clone() for p in enc.parameters()]))
     torch.testing.assert_close(grads[0][0], grads[1][0])
