@@ -259,32 +259,50 @@ def padding_bias(valid: Tensor) -> Tensor:
     return torch.where(valid, 0.0, float("-inf")).unsqueeze(-1)
 
 
+def set_amax(x: Tensor) -> Tensor:
+    """(R, N, D) -> (R, D): `x.amax(dim=1)`, the same values, fast for narrow embeddings.
+
+    torch's CPU `amax` over the set axis takes a slow path when a row has fewer than 32
+    dimensions (16: 0.21-0.49 ms for a chunk of 16,384 elements, against 0.03-0.05 ms at 32;
+    docs/benchmarks.md, "Trainer", session 37). A maximum does not depend on the order it is
+    taken in, so for D dividing 32 the set is read as (R, N / g, g D) with g = 32 / D
+    consecutive elements side by side, reduced at 32 wide, and the g partial maxima reduced
+    last; elements left over when g does not divide N are reduced on their own."""
+    r, n, d = x.shape
+    g = 32 // d if d < 32 and 32 % d == 0 else 1
+    if g == 1 or n < 2 * g:
+        return x.amax(dim=1)
+    m = n - n % g
+    top = x[:, :m].reshape(r, m // g, g * d).amax(dim=1).view(r, g, d).amax(dim=1)
+    if m < n:
+        top = torch.maximum(top, x[:, m:].amax(dim=1))
+    return top
+
+
 def first_max_index(x: Tensor) -> Tensor:
     """(R, N, D) -> (R, D) int64: the index of the first maximum over the set axis, the same as
     `x.max(dim=1).indices` (which picks the first maximal element on the CPU).
 
     Made of vectorised whole-tensor ops: torch's CPU `max` with indices reduces the middle axis
-    element by element, 15-25x slower than `amax` (a laptop chunk of 16,384 elements x 32
-    dimensions: 0.7-0.9 ms), and was the largest single op of a Deep Sets update with 32
-    objects (docs/benchmarks.md, "Trainer"). Each element scores its rank from the end of the
-    set (N for the first, 1 for the last) where it equals the maximum and 0 elsewhere; the
-    largest score is the first maximum. `sign` (not a comparison) marks the maximum: torch's
-    CPU comparisons, which write bools, are about 6x slower than float arithmetic here; and
-    the steps work in place on one buffer, since every fresh buffer of a chunk's size costs
-    more in page faults than the arithmetic does. A row whose elements are all -inf (padding)
-    gives index 0, as `max` does.
-
-    Below 32 dimensions torch's CPU `amax` over the set axis takes a slow path of its own (16
-    dimensions: 0.2-0.5 ms a chunk, against 0.03 ms at 32), and `max` is the faster of the two
-    there (docs/benchmarks.md, "Trainer", session 37); both give the same indices."""
+    element by element, 3-5x slower (a chunk of 16,384 elements x 32 dimensions: 0.55-1.17 ms,
+    against 0.20-0.32 ms here), and was the largest single op of a Deep Sets update with 32
+    objects (docs/benchmarks.md, "Trainer", session 37). Each element scores its rank from the
+    end of the set (N for the first, 1 for the last) where it equals the maximum and 0
+    elsewhere; the largest score is the first maximum. `sign` (not a comparison) marks the
+    maximum: torch's CPU comparisons, which write bools, are about 6x slower than float
+    arithmetic here; and the steps work in place on one buffer, since every fresh buffer of a
+    chunk's size costs more in page faults than the arithmetic does. Both maxima are taken by
+    `set_amax`. A row whose elements are all -inf (padding) gives index 0, as `max` does.
+    Below 16 dimensions torch's `max` is the faster (8: 0.11-0.26 ms against 0.16-0.40 ms)
+    and is used; both give the same indices."""
     n, width = x.shape[1], x.shape[2]
-    if width < 32 and x.device.type == "cpu":
+    if width < 16 and x.device.type == "cpu":
         return x.max(dim=1).indices
     # float32 ranks whatever x's dtype: integers up to 2**24 exactly (bf16 only up to 256)
     rank = torch.arange(n, 0, -1, dtype=torch.float32, device=x.device).view(1, n, 1)
-    score = (x - x.amax(dim=1, keepdim=True)).float()  # 0 at the maximum, < 0 below it
+    score = (x - set_amax(x).unsqueeze(1)).float()  # 0 at the maximum, < 0 below it
     score.sign_().add_(1.0).mul_(rank)  # rank at the maximum, 0 below it
-    first = score.amax(dim=1)
+    first = set_amax(score)
     # -inf - -inf is nan in a row of padding; whether sign(nan) is 0 or nan, the index is 0
     return (n - first.nan_to_num_(nan=float(n))).long()
 
@@ -311,7 +329,7 @@ def _chunk_max(encoder: nn.Module, x: Tensor, valid: Tensor | None) -> Tensor:
     emb = encoder(x)
     if valid is not None:
         emb.add_(padding_bias(valid))
-    return emb.amax(dim=1)
+    return set_amax(emb)
 
 
 def _encoded_max(encoder: nn.Module, x: Tensor, valid: Tensor) -> Tensor:

@@ -9,7 +9,14 @@ import torch
 from torch import nn
 
 from selfplaydrive.models import DeepSetsModel, TransformerModel
-from selfplaydrive.models.common import encode_max, few_winners, first_max_index, masked_max, padding_bias
+from selfplaydrive.models.common import (
+    encode_max,
+    few_winners,
+    first_max_index,
+    masked_max,
+    padding_bias,
+    set_amax,
+)
 from selfplaydrive.obs.layout import ObsLayout
 
 LAYOUT = ObsLayout(max_objects=6, max_road=40)
@@ -85,7 +92,9 @@ def test_masked_max_gradient_goes_to_the_winner_only() -> None:
     assert x.grad.tolist() == [[[0.0, 1.0], [1.0, 0.0], [0.0, 0.0]]]
 
 
-@pytest.mark.parametrize(("rows", "n", "width"), [(64, 1, 4), (300, 20, 32), (40, 64, 48), (9, 300, 33)])
+@pytest.mark.parametrize(
+    ("rows", "n", "width"), [(64, 1, 4), (300, 20, 32), (40, 64, 48), (9, 300, 33), (50, 7, 16), (30, 33, 16)]
+)
 def test_first_max_index_is_torch_max_indices_on_random_sets(rows: int, n: int, width: int) -> None:
     """The NumPy-free reference is torch's own `max(dim=1).indices` (the first maximum on the
     CPU): equal on random sets with exact ties, padding (-inf) and all-padding rows."""
@@ -106,9 +115,21 @@ def test_first_max_index_is_torch_max_indices_on_random_sets(rows: int, n: int, 
 def test_first_max_index_by_hand() -> None:
     x = torch.tensor([[[1.0, 5.0], [3.0, 5.0], [3.0, -1.0]]])  # (1, 3, 2)
     assert first_max_index(x).tolist() == [[1, 0]]  # 3 first at element 1; 5 first at element 0
-    wide = x.repeat(1, 1, 16)  # 32 dimensions: the vectorised path, not torch's max
+    wide = x.repeat(1, 1, 16)  # 32 dimensions: the vectorised path, not torch's max (below 16)
     assert first_max_index(wide).tolist() == [[1, 0] * 16]
     assert first_max_index(wide.to(torch.bfloat16)).tolist() == [[1, 0] * 16]
+
+
+@pytest.mark.parametrize(("n", "width"), [(1, 16), (3, 16), (7, 16), (64, 16), (9, 8), (20, 32), (5, 24)])
+def test_set_amax_is_amax_over_the_set(n: int, width: int) -> None:
+    """Narrow embeddings are reduced 32 wide (g elements side by side, the rest on their own):
+    the values must be torch's `amax` exactly, with padding and all-padding rows."""
+    gen = torch.Generator().manual_seed(n * width)
+    x = torch.randn(41, n, width, generator=gen)
+    valid = torch.rand(41, n, generator=gen) < 0.6
+    valid[0] = False
+    x = x + padding_bias(valid)
+    assert torch.equal(set_amax(x), x.amax(dim=1))
 
 
 def test_padding_bias_is_masked_fill_with_minus_inf() -> None:
