@@ -199,6 +199,18 @@ def install_overlay(overlay: str | None):
     return seed_everything
 
 
+def weights_digest(state: dict) -> str:
+    """Short SHA-256 of a model's weights (names and values in order): equal digests, equal
+    starting weights."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name, value in state.items():
+        h.update(name.encode())
+        h.update(value.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
 def worker(overrides: list[str], overlay: str | None, init_from: str | None = None) -> None:
     """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin.
     `init_from`: load these weights first (read by this tree's checkpoint code, whichever
@@ -218,6 +230,7 @@ def worker(overrides: list[str], overlay: str | None, init_from: str | None = No
         actor = getattr(trainer, "actor", trainer.model)  # overlap_collection's copy
         if actor is not trainer.model:
             actor.load_state_dict(trainer.model.state_dict())
+    start = weights_digest(trainer.model.state_dict())
     env_time = timed_env_step(trainer.env)
     t0 = time.perf_counter()
     trainer.train(num_updates=1)  # warm-up: allocations, first reset, compiling (trainer.compile)
@@ -239,6 +252,7 @@ def worker(overrides: list[str], overlay: str | None, init_from: str | None = No
         "trainer_file": sys.modules[type(trainer).__module__].__file__,
         "slots_per_update": trainer.slots_per_update,
         "init_from": init_from,
+        "initial_weights": start,
     }
     print(json.dumps(info), flush=True)
     for line in sys.stdin:

@@ -109,3 +109,32 @@ def test_overlay_of_a_build_older_than_this_trees_run_module(bench, tmp_path):
         str(tmp_path / "selfplaydrive" / "trainers" / "ppo" / "trainer.py"),
         str(tmp_path / "selfplaydrive" / "models" / "deepsets.py"),
     ]
+
+
+def test_init_from_starts_both_builds_from_the_shipped_weights(bench):
+    """`--init-from pretrained`: both workers (here this tree twice, one with other overrides)
+    start from the shipped policy's weights, and the summary reports slot-steps and acting
+    shares. The digests come from the workers' own models after loading."""
+    from selfplaydrive.policies import load_checkpoint
+    from selfplaydrive.pretrained import resolve_spec
+
+    shipped = bench.weights_digest(load_checkpoint(resolve_spec("pretrained"))["model"])
+    overrides = [
+        "model=deepsets_laptop",
+        "reward=paper",
+        "obs.max_objects=32",  # the shipped policy's layout
+        "spawner.num_agents=8",
+        "env.num_worlds=1",
+        "trainer.rollout_length=4",
+        "trainer.num_minibatches=1",
+        "trainer.overlap_collection=false",
+        "trainer.learning_rate=1e-12",
+    ]
+    result = bench.run(overrides, 1, None, ["trainer.num_epochs=1"], init_from="pretrained")
+    for key in ("current", "baseline"):
+        r = result[key]
+        assert r["init_from"] == "pretrained" and r["initial_weights"] == shipped
+        assert r["slots_per_update"] == 4 * 8
+        assert 0.0 < r["acting_share"] <= 1.0
+        assert r["slot_steps_per_s"] >= r["agent_steps_per_s"] > 0
+    assert result["slot_ratio_of_medians"] > 0
