@@ -267,9 +267,10 @@ def set_amax(x: Tensor) -> Tensor:
     docs/benchmarks.md, "Trainer", session 37). A maximum does not depend on the order it is
     taken in, so for D dividing 32 the set is read as (R, N / g, g D) with g = 32 / D
     consecutive elements side by side, reduced at 32 wide, and the g partial maxima reduced
-    last; elements left over when g does not divide N are reduced on their own."""
+    last; elements left over when g does not divide N are reduced on their own. On other
+    devices `amax` as it is (one kernel; more launches would cost there, unmeasured)."""
     r, n, d = x.shape
-    g = 32 // d if d < 32 and 32 % d == 0 else 1
+    g = 32 // d if d < 32 and 32 % d == 0 and x.device.type == "cpu" else 1
     if g == 1 or n < 2 * g:
         return x.amax(dim=1)
     m = n - n % g
@@ -294,9 +295,11 @@ def first_max_index(x: Tensor) -> Tensor:
     chunk's size costs more in page faults than the arithmetic does. Both maxima are taken by
     `set_amax`. A row whose elements are all -inf (padding) gives index 0, as `max` does.
     Below 16 dimensions torch's `max` is the faster (8: 0.11-0.26 ms against 0.16-0.40 ms)
-    and is used; both give the same indices."""
+    and is used; both give the same indices. So is it on other devices than the CPU, where it
+    is one kernel against about ten (the GPU runs were measured with it; which of tied maxima
+    it returns there is not documented)."""
     n, width = x.shape[1], x.shape[2]
-    if width < 16 and x.device.type == "cpu":
+    if width < 16 or x.device.type != "cpu":
         return x.max(dim=1).indices
     # float32 ranks whatever x's dtype: integers up to 2**24 exactly (bf16 only up to 256)
     rank = torch.arange(n, 0, -1, dtype=torch.float32, device=x.device).view(1, n, 1)
