@@ -10,11 +10,11 @@ from selfplaydrive.models.common import (
     count_parameters,
     entropy,
     log_prob,
-    masked_max,
     sample_actions,
     split_logits,
 )
 from selfplaydrive.models.deepsets import DeepSetsModel
+from selfplaydrive.models.pooling import masked_max
 from selfplaydrive.models.transformer import TransformerModel
 
 __all__ = [

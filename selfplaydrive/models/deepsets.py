@@ -15,18 +15,15 @@ from itertools import pairwise
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.models.common import (
-    EAGER_POOLING,
     ObsSplitter,
-    PoolKernels,
     State,
     check_nvec,
     check_positive,
-    compact_sets,
-    encode_max,
     middle_prior_bias,
     orthogonal_,
     reset_state,
 )
+from selfplaydrive.models.pooling import EAGER_POOLING, PoolKernels, compact_sets, encode_max
 from selfplaydrive.obs.layout import ObsLayout
 
 with requires_extra("torch"):

@@ -19,11 +19,11 @@ from selfplaydrive.models.common import (
     State,
     check_nvec,
     check_positive,
-    compact_sets,
     middle_prior_bias,
     mlp,
     orthogonal_,
 )
+from selfplaydrive.models.pooling import compact_sets
 from selfplaydrive.obs.layout import ObsLayout
 
 with requires_extra("torch"):

@@ -32,7 +32,8 @@ from gymnasium import spaces
 
 from selfplaydrive._optional import requires_extra
 from selfplaydrive.errors import ConfigError
-from selfplaydrive.models.common import ObsSplitter, compact_sets, masked_max, mlp
+from selfplaydrive.models.common import ObsSplitter, mlp
+from selfplaydrive.models.pooling import compact_sets, masked_max
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers.ppo.episodes import EpisodeTracker, summarize
 

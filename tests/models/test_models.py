@@ -19,7 +19,8 @@ from selfplaydrive.models import (
     masked_max,
     sample_actions,
 )
-from selfplaydrive.models.common import ObsSplitter, compact_sets
+from selfplaydrive.models.common import ObsSplitter
+from selfplaydrive.models.pooling import compact_sets
 from selfplaydrive.obs.layout import EGO_FEATURES, ObsLayout
 
 SMALL = ObsLayout(max_objects=6, max_road=10)

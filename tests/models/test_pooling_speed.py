@@ -9,7 +9,7 @@ import torch
 from torch import nn
 
 from selfplaydrive.models import DeepSetsModel, TransformerModel
-from selfplaydrive.models.common import (
+from selfplaydrive.models.pooling import (
     encode_max,
     few_winners,
     first_max_index,

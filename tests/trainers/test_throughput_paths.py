@@ -13,9 +13,9 @@ from ppo_helpers import TinyPolicy, lane_env
 
 from selfplaydrive.errors import ConfigError
 from selfplaydrive.models import DeepSetsModel
-from selfplaydrive.models import common as model_common
-from selfplaydrive.models.common import EAGER_POOLING, PoolKernels, encode_max
+from selfplaydrive.models import pooling as model_pooling
 from selfplaydrive.models.deepsets import _InputLinear
+from selfplaydrive.models.pooling import EAGER_POOLING, PoolKernels, encode_max
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
 from selfplaydrive.trainers.ppo import trainer as trainer_module
@@ -204,7 +204,7 @@ def test_trainer_compile_option(monkeypatch, recwarn):
         made.append(cls())
         return made[-1]
 
-    monkeypatch.setattr(model_common.PoolKernels, "compiled", classmethod(fake_compiled))
+    monkeypatch.setattr(model_pooling.PoolKernels, "compiled", classmethod(fake_compiled))
     assert make_trainer(DeepSetsModel).model.pool_kernels is EAGER_POOLING  # off by default
     trainer = make_trainer(DeepSetsModel, compile=True)
     assert trainer.compiled and trainer.model.pool_kernels is made[0]
