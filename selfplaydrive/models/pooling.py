@@ -79,7 +79,7 @@ def set_amax(x: Tensor) -> Tensor:
     """(R, N, D) -> (R, D): `x.amax(dim=1)`, the same values, fast for narrow embeddings.
 
     torch's CPU `amax` over the set axis takes a slow path when a row has fewer than 32
-    dimensions (16: 0.21-0.49 ms for a chunk of 16,384 elements, against 0.03-0.05 ms at 32;
+    dimensions (16: 0.18-0.47 ms for a chunk of 16,384 elements, against 0.03-0.05 ms at 32;
     docs/benchmarks.md, "Trainer", session 37). A maximum does not depend on the order it is
     taken in, so for D dividing 32 the set is read as (R, N / g, g D) with g = 32 / D
     consecutive elements side by side, reduced at 32 wide, and the g partial maxima reduced
