@@ -25,10 +25,12 @@ PPO epochs; with a baseline, the ratio of the medians and the median of the per-
 
 Agent-steps count the slots that act, and a build whose update skips the others costs less per
 update when fewer act; two builds that learn from the same start soon drive differently and
-keep different numbers of agents alive. So slot-steps/s and the acting share are reported too,
-and `--init-from` starts both builds from the same weights (a checkpoint, or "pretrained");
-with `trainer.learning_rate=1e-12` both then act with the same policy throughout: the same
-work for both, the trainer's speed alone (docs/benchmarks.md, "Trainer").
+keep different numbers of agents alive (a policy that learns to stand keeps them all). So
+slot-steps/s, the acting share and the acting agents' mean speed are reported too, and
+`--init-from` starts both builds from the same weights (a checkpoint, "pretrained", or
+"initial": this tree's initial weights for the overrides); with `trainer.learning_rate=1e-12`
+both then act with the same policy throughout: the same work for both, the trainer's speed
+alone (docs/benchmarks.md, "Trainer").
 """
 
 from __future__ import annotations
@@ -123,6 +125,16 @@ def timed_env_step(env) -> list[float]:
     return total
 
 
+def acting_speed(env) -> float:
+    """Mean speed [m/s] of the agents acting now (0 when none act). The env is this tree's in
+    every build, so the figure compares the builds' policies: one that learns to stand keeps its
+    agents alive, and more agent-steps per slot-step, without a faster trainer."""
+    import numpy as np
+
+    acting = env.masks
+    return float(np.mean(env.buffers["speed"].reshape(-1)[acting])) if acting.any() else 0.0
+
+
 def one_overlapped_update(trainer, env_time: list[float]) -> dict[str, float]:
     """One update with `trainer.overlap_collection` (the next rollout collected in a second
     thread meanwhile): phases overlap, so `update` is the wall time and `collect_s` the
@@ -135,6 +147,7 @@ def one_overlapped_update(trainer, env_time: list[float]) -> dict[str, float]:
     collect_s = steps / metrics["collect_sps"] if metrics.get("collect_sps") else float("nan")
     env_s = env_time[0] - env0
     return {
+        "acting_speed": acting_speed(trainer.env),
         "agent_steps": steps,
         "wall_s": t1 - t0,
         "cpu_s": cpu1 - cpu0,
@@ -172,6 +185,7 @@ def one_update(trainer, env_time: list[float]) -> dict[str, float]:
         torch.cuda.empty_cache()
     env_s = env_time[0] - env0
     return {
+        "acting_speed": acting_speed(trainer.env),
         "agent_steps": trainer.agent_steps - steps0,
         "wall_s": t3 - t0,
         "cpu_s": cpu1 - cpu0,
@@ -211,10 +225,13 @@ def weights_digest(state: dict) -> str:
     return h.hexdigest()[:16]
 
 
-def worker(overrides: list[str], overlay: str | None, init_from: str | None = None) -> None:
+def worker(
+    overrides: list[str], overlay: str | None, init_from: str | None = None, save_initial: str | None = None
+) -> None:
     """Build, warm up, print a JSON info line, then one JSON line per "update" on stdin.
     `init_from`: load these weights first (read by this tree's checkpoint code, whichever
-    build runs: an older build may not read the checkpoint's format)."""
+    build runs: an older build may not read the checkpoint's format). `save_initial`: write
+    the starting weights there (this tree's checkpoint format) before the warm-up."""
     weights = None
     if init_from:
         from selfplaydrive.policies import load_checkpoint
@@ -231,6 +248,10 @@ def worker(overrides: list[str], overlay: str | None, init_from: str | None = No
         if actor is not trainer.model:
             actor.load_state_dict(trainer.model.state_dict())
     start = weights_digest(trainer.model.state_dict())
+    if save_initial:
+        from selfplaydrive.trainers.ppo import checkpoint
+
+        checkpoint.save(save_initial, {"model": trainer.model.state_dict()})
     env_time = timed_env_step(trainer.env)
     t0 = time.perf_counter()
     trainer.train(num_updates=1)  # warm-up: allocations, first reset, compiling (trainer.compile)
@@ -275,9 +296,11 @@ class Worker:
         overlay: Path | None,
         env: dict[str, str] | None = None,
         init_from: str | None = None,
+        save_initial: str | None = None,
     ) -> None:
         cmd = [sys.executable, __file__, "--worker", *(["--overlay", str(overlay)] if overlay else [])]
         cmd += ["--init-from", init_from] if init_from else []
+        cmd += ["--save-initial", save_initial] if save_initial else []
         self.label = label
         self.proc = subprocess.Popen(
             [*cmd, "--", *overrides],
@@ -319,12 +342,13 @@ def rate(u: dict[str, float]) -> float:
 
 def summarize(updates: list[dict[str, float]], slots: int) -> dict[str, float]:
     """Medians over updates: agent-steps/s (wall, CPU, collection), slot-steps/s (`slots`
-    slot-steps an update), the acting share and the phase shares."""
+    slot-steps an update), the acting share, the acting agents' speed and the phase shares."""
     med = statistics.median
     out = {
         "agent_steps_per_s": med(rate(u) for u in updates),
         "slot_steps_per_s": med(slots / u["wall_s"] for u in updates),
         "acting_share": med(u["agent_steps"] / slots for u in updates),
+        "acting_speed": med(u["acting_speed"] for u in updates),
         "agent_steps_per_cpu_s": med(u["agent_steps"] / u["cpu_s"] for u in updates),
         "collect_agent_steps_per_s": med(u["agent_steps"] / u["collect_s"] for u in updates),
         "wall_s_per_update": med(u["wall_s"] for u in updates),
@@ -349,10 +373,15 @@ def run(
     compare settings of one build) are given; without a revision it runs this tree."""
     load0 = os.getloadavg()
     compare = bool(baseline or baseline_overrides or baseline_env)
-    if init_from and init_from != "pretrained":
+    if init_from and init_from not in ("pretrained", "initial"):
         init_from = str(Path(init_from).resolve())  # the workers run in the repository root
     with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
-        workers = [Worker("current", overrides, None, init_from=init_from)]
+        # "initial": this tree's worker writes its starting weights, the baseline's starts from them
+        initial = str(Path(tmp) / "initial.pt") if init_from == "initial" else None
+        workers = [
+            Worker("current", overrides, None, init_from=None if initial else init_from, save_initial=initial)
+        ]
+        init_from = initial or init_from
         if baseline:
             export_build(baseline, Path(tmp))
         if compare:
@@ -416,7 +445,7 @@ def report(result: dict[str, object]) -> str:
             f"{r['agent_steps_per_s']:,.0f} agent-steps/s overall, "
             f"{r['agent_steps_per_cpu_s']:,.0f} per CPU-s, "
             f"{r['collect_agent_steps_per_s']:,.0f} collecting; {r['slot_steps_per_s']:,.0f} slot-steps/s, "
-            f"acting share {r['acting_share']:.0%}; time: {shares}; "
+            f"acting share {r['acting_share']:.0%} at {r['acting_speed']:.1f} m/s; time: {shares}; "
             f"warm-up update {r['warmup_s']:.1f} s"
         )
     if "ratio_of_medians" in result:
@@ -456,16 +485,18 @@ def main() -> None:
     parser.add_argument(
         "--init-from",
         metavar="CKPT",
-        help='start every build from these weights (a checkpoint, or "pretrained"); with '
-        "trainer.learning_rate=1e-12 both act with the same policy throughout",
+        help='start every build from these weights (a checkpoint, "pretrained", or "initial": this '
+        "tree's initial weights for the overrides); with trainer.learning_rate=1e-12 both act with "
+        "the same policy throughout",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--json-out", metavar="FILE", help="also write the summary as JSON to FILE")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--overlay", help=argparse.SUPPRESS)
+    parser.add_argument("--save-initial", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        worker(args.overrides, args.overlay, args.init_from)
+        worker(args.overrides, args.overlay, args.init_from, args.save_initial)
         return
     env = dict(item.split("=", 1) for item in args.baseline_env)
     result = run(args.overrides, args.updates, args.baseline, args.baseline_overrides, env, args.init_from)

@@ -50,6 +50,7 @@ def test_overlay_imports_the_exported_code_in_a_fresh_process(bench, tmp_path):
 def test_summary_takes_medians_and_phase_shares(bench):
     updates = [
         {
+            "acting_speed": 1.0,
             "agent_steps": 100,
             "wall_s": 1.0,
             "cpu_s": 2.0,
@@ -60,6 +61,7 @@ def test_summary_takes_medians_and_phase_shares(bench):
             "update": 0.5,
         },
         {
+            "acting_speed": 3.0,
             "agent_steps": 300,
             "wall_s": 1.0,
             "cpu_s": 1.0,
@@ -70,6 +72,7 @@ def test_summary_takes_medians_and_phase_shares(bench):
             "update": 0.4,
         },
         {
+            "acting_speed": 0.5,
             "agent_steps": 1000,
             "wall_s": 2.0,
             "cpu_s": 2.0,
@@ -84,6 +87,7 @@ def test_summary_takes_medians_and_phase_shares(bench):
     assert out["agent_steps_per_s"] == 300  # rates 100, 300, 500
     assert out["slot_steps_per_s"] == 1000  # 1000 slot-steps in 1, 1, 2 s: 1000, 1000, 500
     assert out["acting_share"] == pytest.approx(0.3)  # 0.1, 0.3, 1.0
+    assert out["acting_speed"] == 1.0  # 1.0, 3.0, 0.5
     assert out["agent_steps_per_cpu_s"] == 300  # 50, 300, 500
     assert out["collect_agent_steps_per_s"] == 600  # 200, 600, 1000
     assert out["share_env_step"] == pytest.approx(0.1)  # 0.1, 0.2, 0.1
@@ -138,3 +142,35 @@ def test_init_from_starts_both_builds_from_the_shipped_weights(bench):
         assert 0.0 < r["acting_share"] <= 1.0
         assert r["slot_steps_per_s"] >= r["agent_steps_per_s"] > 0
     assert result["slot_ratio_of_medians"] > 0
+
+
+def test_acting_speed_is_the_mean_over_the_acting_agents(bench):
+    """Hand-computed: agents at 10 and 20 m/s act, one at 30 m/s does not."""
+    import numpy as np
+
+    class Env:
+        masks = np.array([True, False, True])
+        buffers = {"speed": np.array([[10.0, 30.0, 20.0]])}  # (W, A) like the env's
+
+    assert bench.acting_speed(Env()) == 15.0
+    Env.masks = np.zeros(3, dtype=bool)
+    assert bench.acting_speed(Env()) == 0.0
+
+
+def test_init_from_initial_gives_the_baseline_this_trees_starting_weights(bench):
+    """`--init-from initial`: this tree's worker writes the weights it starts from and the
+    baseline's worker (here this tree with a different seed, which would start elsewhere)
+    loads them."""
+    overrides = [
+        "spawner.num_agents=8",
+        "env.num_worlds=1",
+        "trainer.rollout_length=4",
+        "trainer.num_minibatches=1",
+        "trainer.overlap_collection=false",
+    ]
+    alone = bench.run([*overrides, "seed=1"], 1, None)["current"]["initial_weights"]
+    result = bench.run(overrides, 1, None, ["seed=1"], init_from="initial")
+    cur, base = result["current"], result["baseline"]
+    assert cur["initial_weights"] == base["initial_weights"] != alone
+    assert cur["init_from"] is None and base["init_from"].endswith("initial.pt")
+    assert cur["acting_speed"] >= 0.0 and base["acting_speed"] >= 0.0
