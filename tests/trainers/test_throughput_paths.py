@@ -18,7 +18,7 @@ from selfplaydrive.models.deepsets import _InputLinear
 from selfplaydrive.models.pooling import EAGER_POOLING, PoolKernels, encode_max
 from selfplaydrive.obs.layout import ObsLayout
 from selfplaydrive.trainers import PPOConfig, PPOTrainer
-from selfplaydrive.trainers.ppo import trainer as trainer_module
+from selfplaydrive.trainers.ppo.device import warn_spinning_threads
 
 CFG = dict(
     total_steps=10_000,
@@ -115,8 +115,8 @@ def test_spinning_torch_threads_are_warned_about(monkeypatch, recwarn, env, thre
     monkeypatch.delenv("GOMP_SPINCOUNT", raising=False)
     for key, value in env.items():
         monkeypatch.setenv(key, value)
-    monkeypatch.setattr(trainer_module.torch, "get_num_threads", lambda: threads)
-    trainer_module.warn_spinning_threads(torch.device("cpu"))
+    monkeypatch.setattr(torch, "get_num_threads", lambda: threads)
+    warn_spinning_threads(torch.device("cpu"))
     messages = [str(w.message) for w in recwarn if issubclass(w.category, RuntimeWarning)]
     assert bool(messages) == warns
     if warns:
