@@ -168,7 +168,16 @@ def test_init_from_initial_gives_the_baseline_this_trees_starting_weights(bench)
         "trainer.num_minibatches=1",
         "trainer.overlap_collection=false",
     ]
-    alone = bench.run([*overrides, "seed=1"], 1, None)["current"]["initial_weights"]
+    import torch
+
+    from selfplaydrive.trainers.run import seed_everything
+
+    threads = torch.get_num_threads()  # build_trainer sets the config's count in this process
+    try:
+        trainer, _ = bench.build_trainer([*overrides, "seed=1"], seed_everything)
+    finally:
+        torch.set_num_threads(threads)
+    alone = bench.weights_digest(trainer.model.state_dict())  # where seed 1 starts by itself
     result = bench.run(overrides, 1, None, ["seed=1"], init_from="initial")
     cur, base = result["current"], result["baseline"]
     assert cur["initial_weights"] == base["initial_weights"] != alone
