@@ -377,17 +377,19 @@ def run(
         init_from = str(Path(init_from).resolve())  # the workers run in the repository root
     with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
         # "initial": this tree's worker writes its starting weights, the baseline's starts from them
-        initial = str(Path(tmp) / "initial.pt") if init_from == "initial" else None
-        workers = [
-            Worker("current", overrides, None, init_from=None if initial else init_from, save_initial=initial)
-        ]
-        init_from = initial or init_from
+        current_init, initial, baseline_init = init_from, None, init_from
+        if init_from == "initial":
+            current_init, initial = None, str(Path(tmp) / "initial.pt")
+            baseline_init = initial
+        workers = [Worker("current", overrides, None, init_from=current_init, save_initial=initial)]
         if baseline:
             export_build(baseline, Path(tmp))
         if compare:
             label = " ".join(["baseline", baseline or "(this tree)", *baseline_overrides])
             overlay = Path(tmp) if baseline else None
-            workers.append(Worker(label, [*overrides, *baseline_overrides], overlay, baseline_env, init_from))
+            workers.append(
+                Worker(label, [*overrides, *baseline_overrides], overlay, baseline_env, baseline_init)
+            )
         try:
             for i in range(updates):
                 for w in workers if i % 2 == 0 else workers[::-1]:

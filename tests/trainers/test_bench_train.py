@@ -161,6 +161,10 @@ def test_init_from_initial_gives_the_baseline_this_trees_starting_weights(bench)
     """`--init-from initial`: this tree's worker writes the weights it starts from and the
     baseline's worker (here this tree with a different seed, which would start elsewhere)
     loads them."""
+    import torch
+
+    from selfplaydrive.trainers.run import seed_everything
+
     overrides = [
         "spawner.num_agents=8",
         "env.num_worlds=1",
@@ -168,10 +172,6 @@ def test_init_from_initial_gives_the_baseline_this_trees_starting_weights(bench)
         "trainer.num_minibatches=1",
         "trainer.overlap_collection=false",
     ]
-    import torch
-
-    from selfplaydrive.trainers.run import seed_everything
-
     threads = torch.get_num_threads()  # build_trainer sets the config's count in this process
     try:
         trainer, _ = bench.build_trainer([*overrides, "seed=1"], seed_everything)
